@@ -1,0 +1,48 @@
+#include "geometry/triangle_mesh.h"
+
+#include <Eigen/Geometry>
+#include <limits>
+
+namespace lfrecon {
+
+void TriangleMesh::Append(const TriangleMesh& other) {
+  const bool keep_normals = (vertices.empty() || HasNormals()) && other.HasNormals();
+  const bool keep_colors = (vertices.empty() || HasColors()) && other.HasColors();
+  const int offset = static_cast<int>(vertices.size());
+  vertices.insert(vertices.end(), other.vertices.begin(), other.vertices.end());
+  if (keep_normals) normals.insert(normals.end(), other.normals.begin(), other.normals.end());
+  else normals.clear();
+  if (keep_colors) colors.insert(colors.end(), other.colors.begin(), other.colors.end());
+  else colors.clear();
+  for (const auto& t : other.triangles) triangles.push_back(t + Eigen::Vector3i::Constant(offset));
+}
+
+void TriangleMesh::ComputeVertexNormals() {
+  normals.assign(vertices.size(), Eigen::Vector3f::Zero());
+  for (const auto& t : triangles) {
+    const Eigen::Vector3f n = (vertices[t[1]] - vertices[t[0]]).cross(vertices[t[2]] - vertices[t[0]]);
+    for (int k = 0; k < 3; ++k) normals[t[k]] += n;
+  }
+  for (auto& n : normals) {
+    const float len = n.norm();
+    if (len > 0) n /= len;
+  }
+}
+
+double TriangleMesh::SurfaceArea() const {
+  double area = 0;
+  for (const auto& t : triangles)
+    area += 0.5 * (vertices[t[1]] - vertices[t[0]]).cross(vertices[t[2]] - vertices[t[0]]).norm();
+  return area;
+}
+
+void TriangleMesh::Bounds(Eigen::Vector3f* min, Eigen::Vector3f* max) const {
+  min->setConstant(std::numeric_limits<float>::max());
+  max->setConstant(std::numeric_limits<float>::lowest());
+  for (const auto& v : vertices) {
+    *min = min->cwiseMin(v);
+    *max = max->cwiseMax(v);
+  }
+}
+
+}  // namespace lfrecon

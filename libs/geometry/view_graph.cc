@@ -1,0 +1,82 @@
+#include "geometry/view_graph.h"
+
+#include <Eigen/Geometry>
+#include <algorithm>
+#include <cmath>
+#include <unordered_map>
+
+namespace lfrecon {
+namespace {
+
+double AngleBetween(const Eigen::Vector3d& a, const Eigen::Vector3d& b) {
+  // atan2 form: accurate for tiny angles, where acos(dot) loses precision.
+  return std::atan2(a.cross(b).norm(), a.dot(b)) * 180.0 / M_PI;
+}
+
+void SortByAngle(const std::vector<Eigen::Vector3d>& dirs, int i, std::vector<int>* list) {
+  std::vector<std::pair<double, int>> keyed;
+  keyed.reserve(list->size());
+  for (int j : *list) keyed.emplace_back(AngleBetween(dirs[i], dirs[j]), j);
+  std::sort(keyed.begin(), keyed.end());
+  for (size_t k = 0; k < keyed.size(); ++k) (*list)[k] = keyed[k].second;
+}
+
+}  // namespace
+
+ViewGraph::ViewGraph(const std::vector<Eigen::Vector3d>& directions, double max_angle_deg)
+    : max_angle_deg_(max_angle_deg) {
+  directions_.reserve(directions.size());
+  for (const auto& d : directions) directions_.push_back(d.normalized());
+  const int n = static_cast<int>(directions_.size());
+  neighbors_.assign(n, {});
+  // Chord length of the angle; directions within the angle are within this
+  // Euclidean distance, so they fall in the same or an adjacent cell.
+  const double chord = 2.0 * std::sin(0.5 * std::min(max_angle_deg, 180.0) * M_PI / 180.0);
+  const double cell = std::max(chord, 1e-6);
+  auto key_of = [&](const Eigen::Vector3i& c) {
+    return (static_cast<long long>(c.x()) * 73856093LL) ^ (static_cast<long long>(c.y()) * 19349663LL) ^
+           (static_cast<long long>(c.z()) * 83492791LL);
+  };
+  auto cell_of = [&](const Eigen::Vector3d& d) {
+    return Eigen::Vector3i(static_cast<int>(std::floor(d.x() / cell)), static_cast<int>(std::floor(d.y() / cell)),
+                           static_cast<int>(std::floor(d.z() / cell)));
+  };
+  std::unordered_map<long long, std::vector<std::pair<Eigen::Vector3i, int>>> grid;
+  std::vector<Eigen::Vector3i> cells(n);
+  for (int i = 0; i < n; ++i) {
+    cells[i] = cell_of(directions_[i]);
+    grid[key_of(cells[i])].emplace_back(cells[i], i);
+  }
+  for (int i = 0; i < n; ++i) {
+    for (int dx = -1; dx <= 1; ++dx)
+      for (int dy = -1; dy <= 1; ++dy)
+        for (int dz = -1; dz <= 1; ++dz) {
+          const Eigen::Vector3i c = cells[i] + Eigen::Vector3i(dx, dy, dz);
+          auto it = grid.find(key_of(c));
+          if (it == grid.end()) continue;
+          for (const auto& [cj, j] : it->second) {
+            if (j == i || cj != c) continue;  // cj != c: hash collision
+            if (AngleBetween(directions_[i], directions_[j]) <= max_angle_deg) neighbors_[i].push_back(j);
+          }
+        }
+    SortByAngle(directions_, i, &neighbors_[i]);
+  }
+}
+
+double ViewGraph::AngleDeg(int i, int j) const { return AngleBetween(directions_.at(i), directions_.at(j)); }
+
+std::vector<std::vector<int>> ViewGraph::BruteForce(const std::vector<Eigen::Vector3d>& directions,
+                                                    double max_angle_deg) {
+  std::vector<Eigen::Vector3d> dirs;
+  for (const auto& d : directions) dirs.push_back(d.normalized());
+  const int n = static_cast<int>(dirs.size());
+  std::vector<std::vector<int>> out(n);
+  for (int i = 0; i < n; ++i) {
+    for (int j = 0; j < n; ++j)
+      if (j != i && AngleBetween(dirs[i], dirs[j]) <= max_angle_deg) out[i].push_back(j);
+    SortByAngle(dirs, i, &out[i]);
+  }
+  return out;
+}
+
+}  // namespace lfrecon

@@ -1,0 +1,36 @@
+#pragma once
+// For each view, the views whose viewing directions lie within a given angle
+// (BRIEF §1: 5° for depth and photoconsistency, 15° for depth filtering).
+// Directions are hashed into a grid on the unit sphere's bounding cube with
+// a cell as large as the chord of the angle, so a query touches 27 cells:
+// O(n · k) for n views with k neighbours each, for any path shape (loops,
+// helices, several passes), not only a single ordered loop.
+#include <Eigen/Core>
+#include <vector>
+
+namespace lfrecon {
+
+class ViewGraph {
+ public:
+  ViewGraph() = default;
+  // `directions` are unit viewing directions (world), one per view.
+  ViewGraph(const std::vector<Eigen::Vector3d>& directions, double max_angle_deg);
+
+  int num_views() const { return static_cast<int>(neighbors_.size()); }
+  double max_angle_deg() const { return max_angle_deg_; }
+  // Neighbours of view i (never i itself), sorted by increasing angle, ties by index.
+  const std::vector<int>& Neighbors(int i) const { return neighbors_.at(i); }
+  // Angle in degrees between views i and j.
+  double AngleDeg(int i, int j) const;
+
+  // The same neighbourhoods by brute force (O(n^2)); for tests and tiny inputs.
+  static std::vector<std::vector<int>> BruteForce(const std::vector<Eigen::Vector3d>& directions,
+                                                  double max_angle_deg);
+
+ private:
+  std::vector<Eigen::Vector3d> directions_;
+  std::vector<std::vector<int>> neighbors_;
+  double max_angle_deg_ = 0;
+};
+
+}  // namespace lfrecon
