@@ -1,0 +1,12 @@
+#pragma once
+// Each subcommand registers itself on the root app. Its callback stores the
+// exit code in *exit_code; errors are thrown (InputError -> 1, OptionError -> 2)
+// and turned into a message and exit code by main().
+#include <CLI/CLI.hpp>
+
+namespace lfrecon::cli {
+
+void AddInfoCommand(CLI::App& root, int* exit_code);
+void AddSynthCommand(CLI::App& root, int* exit_code);
+
+}  // namespace lfrecon::cli
