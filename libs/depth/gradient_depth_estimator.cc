@@ -1,0 +1,358 @@
+#include "depth/gradient_depth_estimator.h"
+
+#include <spdlog/spdlog.h>
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+
+#include <Eigen/LU>
+#include <algorithm>
+#include <atomic>
+#include <cmath>
+#include <opencv2/imgproc.hpp>
+
+#include "depth/image_sampling.h"
+#include "util/error.h"
+
+namespace lfrecon {
+
+void GradientDepthOptions::Check() const {
+  LFRECON_CHECK_OPTION(gradient_threshold >= 0);
+  LFRECON_CHECK_OPTION(patch_length >= 3 && patch_length % 2 == 1);
+  LFRECON_CHECK_OPTION(sigma_c > 0);
+  LFRECON_CHECK_OPTION(max_view_angle_deg > 0 && max_view_angle_deg < 90);
+  LFRECON_CHECK_OPTION(refine_reference_points >= 1);
+  LFRECON_CHECK_OPTION(shift_iterations >= 0);
+  LFRECON_CHECK_OPTION(outlier_pixels > 0);
+  LFRECON_CHECK_OPTION(min_depth >= 0);
+  LFRECON_CHECK_OPTION(max_depth <= 0 || max_depth > min_depth);
+  LFRECON_CHECK_OPTION(max_reference_points >= 2);
+}
+
+cv::Mat GradientMagnitude(const cv::Mat& image_bgr) {
+  cv::Mat grey, gx, gy, mag;
+  cv::cvtColor(image_bgr, grey, cv::COLOR_BGR2GRAY);
+  // 3x3 Sobel / 8 = smoothed central difference per pixel.
+  cv::Sobel(grey, gx, CV_32F, 1, 0, 3, 1.0 / 8.0);
+  cv::Sobel(grey, gy, CV_32F, 0, 1, 3, 1.0 / 8.0);
+  cv::magnitude(gx, gy, mag);
+  return mag;
+}
+
+namespace {
+
+// Geometry of one (reference i, neighbour j) pair that does not depend on the pixel.
+struct PairGeometry {
+  const ViewImage* view = nullptr;
+  Eigen::Matrix3d A;      // K_j R_ji K_i^-1: homogeneous j-pixel of p at depth d is d·A·p̃ + a
+  Eigen::Vector3d a;      // K_j t_ji
+  Eigen::Matrix3d A_inv;  // for H(d)^-1 by Sherman-Morrison
+  Eigen::Vector3d g;      // A^-1 a
+  Eigen::RowVector3d r3;  // third row of A^-1
+  double r3a = 0;         // r3 · a
+  Eigen::Vector3d baseline;  // C_j - C_i (world)
+  double angle_deg = 0;
+};
+
+// The epipolar line of one pixel in one neighbour, parameterised by the
+// coordinate S along its unit direction u (S grows with depth).
+struct EpipolarRay {
+  const PairGeometry* pair = nullptr;
+  Eigen::Vector3d b;     // A p̃
+  Eigen::Vector2d u, n;  // direction and normal of ℓ
+  double w = 0;          // n · (any point of ℓ)
+
+  bool Init(const PairGeometry& pg, const Eigen::Vector3d& p_h) {
+    pair = &pg;
+    b = pg.A * p_h;
+    const Eigen::Vector2d num = b.head<2>() * pg.a.z() - pg.a.head<2>() * b.z();
+    const double len = num.norm();
+    if (!(len > 1e-12)) return false;  // no baseline along this ray: coincident cameras
+    u = num / len;
+    n = Eigen::Vector2d(-u.y(), u.x());
+    w = n.dot(Pixel(1.0));
+    return true;
+  }
+  Eigen::Vector2d Pixel(double d) const {
+    const double z = d * b.z() + pair->a.z();
+    return (d * b.head<2>() + pair->a.head<2>()) / z;
+  }
+  bool InFront(double d) const { return d * b.z() + pair->a.z() > 0; }
+  double S(double d) const { return u.dot(Pixel(d)); }
+  // Depth whose projection has line coordinate s; <= 0 if none in front.
+  double Depth(double s) const {
+    const double den = u.dot(b.head<2>()) - s * b.z();
+    if (std::abs(den) < 1e-15) return -1;
+    return (s * pair->a.z() - u.dot(pair->a.head<2>())) / den;
+  }
+  double dSdd(double d) const {
+    const double z = d * b.z() + pair->a.z();
+    return u.dot(b.head<2>() * pair->a.z() - pair->a.head<2>() * b.z()) / (z * z);
+  }
+  Eigen::Vector2d Point(double s) const { return s * u + w * n; }
+  // j-pixel back to i through the plane fronto-parallel to i at depth d.
+  Eigen::Vector2d BackToReference(const Eigen::Vector2d& y, double d) const {
+    const Eigen::Vector3d yh(y.x(), y.y(), 1.0);
+    const Eigen::Vector3d x = pair->A_inv * yh - pair->g * (pair->r3.dot(yh) / (d + pair->r3a));
+    return x.head<2>() / x.z();
+  }
+};
+
+// Result of measuring the shift at one reference point.
+struct ShiftMeasurement {
+  bool valid = false;
+  double shift = 0;     // δ: match is at S + δ (pixels along ℓ)
+  double energy = 0;    // Σ gx², gradient energy along ℓ
+  double colour = 0;    // C^c at the match (eq. 4)
+};
+
+class PixelSolver {
+ public:
+  PixelSolver(const GradientDepthOptions& o, const cv::Mat& ref_image, const Eigen::Vector2d& p,
+              const Eigen::Vector3f& ref_colour)
+      : o_(o), ref_(ref_image), p_(p), ref_colour_(ref_colour), half_(o.patch_length / 2),
+        inv_two_sigma_c2_(1.0 / (2.0 * o.sigma_c * o.sigma_c)) {}
+
+  // The 2×5 patch at line coordinate s (reference depth D(s)) and its least-squares shift.
+  ShiftMeasurement Measure(const EpipolarRay& ray, double s) const {
+    ShiftMeasurement m;
+    const double d = ray.Depth(s);
+    if (!(d > 0) || !ray.InFront(d)) return m;
+    const cv::Mat& img_j = ray.pair->view->image;
+    Eigen::Vector3f sj[9], si[9];
+    const int L = 2 * half_ + 1;
+    for (int k = 0; k < L; ++k) {
+      const Eigen::Vector2d y = ray.Point(s + (k - half_));
+      if (!SampleBilinear3(img_j, y.x(), y.y(), &sj[k])) return m;
+      const Eigen::Vector2d x = ray.BackToReference(y, d);
+      if (!SampleBilinear3(ref_, x.x(), x.y(), &si[k])) return m;
+    }
+    double sxy = 0, sxx = 0;
+    for (int k = 1; k + 1 < L; ++k) {
+      const Eigen::Vector3f gx = 0.25f * (si[k + 1] - si[k - 1] + sj[k + 1] - sj[k - 1]);
+      const Eigen::Vector3f gy = sj[k] - si[k];
+      sxy += gx.dot(gy);
+      sxx += gx.squaredNorm();
+    }
+    if (!(sxx > 1e-12)) return m;
+    m.shift = -sxy / sxx;
+    m.energy = sxx;
+    m.valid = std::isfinite(m.shift);
+    if (!m.valid) return m;
+    Eigen::Vector3f c;
+    const Eigen::Vector2d y = ray.Point(s + m.shift);
+    if (!SampleBilinear3(img_j, y.x(), y.y(), &c)) {
+      m.valid = false;
+      return m;
+    }
+    m.colour = std::exp(-(c - ref_colour_).squaredNorm() * inv_two_sigma_c2_);
+    return m;
+  }
+
+  // Best of the reference points s0, s0+1, ... (count of them) by C = C^c·C^d,
+  // then Gauss-Newton on the shift. Returns the match coordinate, or NaN.
+  double Search(const EpipolarRay& ray, double s0, int count, ShiftMeasurement* best_out) const {
+    double best_c = -1, best_s = std::numeric_limits<double>::quiet_NaN();
+    ShiftMeasurement best;
+    for (int k = 0; k < count; ++k) {
+      const double s = s0 + k;
+      const ShiftMeasurement m = Measure(ray, s);
+      if (!m.valid || std::abs(m.shift) > 2.0) continue;
+      const double c = m.colour * std::exp(-m.shift * m.shift);  // C^c · C^d (eq. 4, 5)
+      if (c > best_c) {
+        best_c = c;
+        best_s = s;
+        best = m;
+      }
+    }
+    if (best_c < 0) return std::numeric_limits<double>::quiet_NaN();
+    double s = best_s + best.shift;
+    for (int it = 0; it < o_.shift_iterations && std::abs(best.shift) > 0.005; ++it) {
+      const ShiftMeasurement m = Measure(ray, s);
+      if (!m.valid || std::abs(m.shift) > 1.0) break;
+      best = m;
+      s += m.shift;
+    }
+    *best_out = best;
+    return s;
+  }
+
+  // C^c of the pixel's colour against neighbour j at depth d.
+  double ColourAt(const EpipolarRay& ray, double d) const {
+    if (!ray.InFront(d)) return 0;
+    const Eigen::Vector2d y = ray.Pixel(d);
+    Eigen::Vector3f c;
+    if (!SampleBilinear3(ray.pair->view->image, y.x(), y.y(), &c)) return 0;
+    return std::exp(-(c - ref_colour_).squaredNorm() * inv_two_sigma_c2_);
+  }
+
+ private:
+  const GradientDepthOptions& o_;
+  const cv::Mat& ref_;
+  Eigen::Vector2d p_;
+  Eigen::Vector3f ref_colour_;
+  int half_;
+  double inv_two_sigma_c2_;
+};
+
+}  // namespace
+
+GradientDepthEstimator::GradientDepthEstimator(const GradientDepthOptions& options) : options_(options) {
+  options_.Check();
+}
+
+DepthMap GradientDepthEstimator::Estimate(const ViewImage& reference, const std::vector<const ViewImage*>& neighbors,
+                                          const BoundingBox& volume) const {
+  const GradientDepthOptions& o = options_;
+  const PinholeView& vi = reference.view;
+  DepthMap out(reference.image.rows, reference.image.cols);
+  if (reference.image.empty() || reference.image.type() != CV_32FC3) {
+    spdlog::warn("depth: reference image is empty or not CV_32FC3; no depth");
+    return out;
+  }
+
+  // Pair geometry for the neighbours within the angle, sorted by angle.
+  std::vector<PairGeometry> pairs;
+  for (const ViewImage* nb : neighbors) {
+    if (!nb || nb->image.empty() || nb->image.type() != CV_32FC3) continue;
+    const double c = std::clamp(vi.ViewingDirection().dot(nb->view.ViewingDirection()), -1.0, 1.0);
+    const double angle = std::acos(c) * 180.0 / M_PI;
+    if (angle > o.max_view_angle_deg) continue;
+    PairGeometry pg;
+    pg.view = nb;
+    Eigen::Matrix3d R;
+    Eigen::Vector3d t;
+    RelativePose(vi, nb->view, &R, &t);
+    pg.A = nb->view.K * R * vi.K_inv;
+    pg.a = nb->view.K * t;
+    pg.baseline = nb->view.Center() - vi.Center();
+    if (pg.baseline.norm() < 1e-9) continue;  // coincident camera: no parallax
+    pg.A_inv = pg.A.inverse();
+    pg.g = pg.A_inv * pg.a;
+    pg.r3 = pg.A_inv.row(2);
+    pg.r3a = pg.r3.dot(pg.a);
+    pg.angle_deg = angle;
+    pairs.push_back(pg);
+  }
+  std::sort(pairs.begin(), pairs.end(),
+            [](const PairGeometry& x, const PairGeometry& y) { return x.angle_deg < y.angle_deg; });
+  if (pairs.empty()) {
+    spdlog::warn("depth: no usable neighbour within {}°; empty depth map", o.max_view_angle_deg);
+    return out;
+  }
+  // First level: the nearest view, and the nearest one on the other side of it.
+  std::vector<int> first_level = {0};
+  for (size_t k = 1; k < pairs.size(); ++k) {
+    if (pairs[k].baseline.dot(pairs[0].baseline) < 0) {
+      first_level.push_back(static_cast<int>(k));
+      break;
+    }
+  }
+  std::vector<int> order = first_level;
+  if (o.use_hierarchy) {
+    for (size_t k = 0; k < pairs.size(); ++k)
+      if (std::find(first_level.begin(), first_level.end(), static_cast<int>(k)) == first_level.end())
+        order.push_back(static_cast<int>(k));
+  }
+
+  // Search range from V.
+  double d_near = o.min_depth, d_far = o.max_depth;
+  if (d_far <= 0) {
+    double zmin = std::numeric_limits<double>::max(), zmax = 0;
+    for (int c = 0; c < 8; ++c) {
+      const Eigen::Vector3d corner((c & 1) ? volume.max.x() : volume.min.x(), (c & 2) ? volume.max.y() : volume.min.y(),
+                                   (c & 4) ? volume.max.z() : volume.min.z());
+      const double z = (vi.R * corner + vi.t).z();
+      zmin = std::min(zmin, z);
+      zmax = std::max(zmax, z);
+    }
+    if (!(zmax > 0)) {
+      spdlog::warn("depth: V is behind the reference camera; empty depth map");
+      return out;
+    }
+    d_near = std::max(0.5 * zmin, 1e-3);
+    d_far = 20.0 * zmax;
+  }
+  d_near = std::max(d_near, 1e-6);
+
+  const cv::Mat grad = GradientMagnitude(reference.image);
+  const int rows = reference.image.rows, cols = reference.image.cols;
+  std::atomic<long long> num_edge{0};
+
+  tbb::parallel_for(tbb::blocked_range<int>(0, rows), [&](const tbb::blocked_range<int>& range) {
+    std::vector<EpipolarRay> rays(pairs.size());
+    std::vector<char> ray_ok(pairs.size());
+    for (int r = range.begin(); r != range.end(); ++r) {
+      const float* grow = grad.ptr<float>(r);
+      const float* irow = reference.image.ptr<float>(r);
+      for (int c = 0; c < cols; ++c) {
+        if (!(grow[c] > o.gradient_threshold)) continue;
+        ++num_edge;
+        const Eigen::Vector2d p(c + 0.5, r + 0.5);
+        const Eigen::Vector3d ph(p.x(), p.y(), 1.0);
+        const Eigen::Vector3f colour(irow[3 * c], irow[3 * c + 1], irow[3 * c + 2]);
+        PixelSolver solver(o, reference.image, p, colour);
+        for (size_t k = 0; k < pairs.size(); ++k) ray_ok[k] = rays[k].Init(pairs[k], ph);
+
+        // Level 1: scan the whole depth range in the first-level views; a
+        // candidate is scored by its own C and by C^c in the other first-level view.
+        double best_score = -1, best_depth = 0;
+        for (size_t f = 0; f < first_level.size(); ++f) {
+          const EpipolarRay& ray = rays[first_level[f]];
+          if (!ray_ok[first_level[f]] || !ray.InFront(d_near)) continue;
+          const double s_near = ray.S(d_near);
+          const double s_far = ray.InFront(d_far) ? ray.S(d_far) : s_near + o.max_reference_points;
+          const int count = std::min(o.max_reference_points, static_cast<int>(std::ceil(s_far - s_near)) + 1);
+          for (int k = 0; k < count; ++k) {
+            const ShiftMeasurement m = solver.Measure(ray, s_near + k);
+            if (!m.valid || std::abs(m.shift) > 2.0) continue;
+            const double d = ray.Depth(s_near + k + m.shift);
+            if (!(d > 0)) continue;
+            double score = m.colour * std::exp(-m.shift * m.shift);
+            for (size_t g = 0; g < first_level.size(); ++g)
+              if (g != f && ray_ok[first_level[g]]) score *= solver.ColourAt(rays[first_level[g]], d);
+            if (score > best_score) {
+              best_score = score;
+              best_depth = d;
+            }
+          }
+        }
+        if (best_score <= 0) continue;
+
+        // All levels, nearest first: search around the prediction, refine the
+        // shift, and fuse the views' depths weighted by their information.
+        double depth = best_depth, sum_w = 0, sum_wd = 0, sum_conf = 0;
+        int used = 0, tried = 0;
+        for (int k : order) {
+          if (!ray_ok[k]) continue;
+          const EpipolarRay& ray = rays[k];
+          if (!ray.InFront(depth)) continue;
+          ++tried;
+          const double s_pred = ray.S(depth);
+          const int K = o.refine_reference_points;
+          ShiftMeasurement m;
+          const double s = solver.Search(ray, s_pred - 0.5 * (K - 1), K, &m);
+          if (!std::isfinite(s) || std::abs(s - s_pred) > o.outlier_pixels) continue;
+          const double d = ray.Depth(s);
+          if (!(d > 0)) continue;
+          const double slope = ray.dSdd(d);
+          const double wgt = m.energy * slope * slope;
+          sum_w += wgt;
+          sum_wd += wgt * d;
+          sum_conf += m.colour * std::exp(-m.shift * m.shift);
+          ++used;
+          depth = sum_wd / sum_w;
+        }
+        if (used == 0 || !(depth > 0) || !std::isfinite(depth)) continue;
+        const float conf = static_cast<float>(sum_conf / std::max(tried, 1));
+        out.depth.at<float>(r, c) = static_cast<float>(depth);
+        out.confidence.at<float>(r, c) = conf;
+        out.label.at<std::uint8_t>(r, c) = static_cast<std::uint8_t>(
+            volume.Contains(vi.Unproject(p, depth)) ? DepthLabel::kForeground : DepthLabel::kBackground);
+      }
+    }
+  });
+  if (num_edge == 0) spdlog::warn("depth: no pixel has a gradient above g = {}; empty depth map", o.gradient_threshold);
+  return out;
+}
+
+}  // namespace lfrecon

@@ -1,0 +1,81 @@
+#pragma once
+// Depth from gradients (paper §3.1, BRIEF §1.1): per pixel with a strong image
+// gradient, the 1-D optical flow along its epipolar line in neighbouring
+// views, measured from the gradient of a 2×5 epipolar patch, gives its depth.
+//
+// Our choices where the paper is open (measured in docs/benchmarks.md):
+//  * The shift of eq. 2-3 is computed as a least-squares fit over the patch's
+//    columns, summed over the colour channels, and iterated (Gauss-Newton) at
+//    the chosen reference point, so it converges instead of being one linear step.
+//  * Levels are not discarded: each view's estimate is kept with a weight equal
+//    to its Fisher information on depth (gradient energy along ℓ times the
+//    squared pixels-per-metre of that view), and the depth is their weighted
+//    mean; a view whose match lies too far from the current prediction is an
+//    outlier and is dropped. Far views thus sharpen the estimate, and pixels
+//    whose edge is nearly parallel to ℓ (the aperture problem) get little weight.
+#include <vector>
+
+#include "depth/depth_map.h"
+#include "geometry/pinhole_view.h"
+#include "geometry/triangle_mesh.h"
+
+namespace lfrecon {
+
+struct GradientDepthOptions {
+  // g: only pixels with ‖∇I‖ above it get a depth (§3.1). Gradient of the
+  // grey image in [0, 1] per pixel (central differences).
+  double gradient_threshold = 0.05;
+  // Length of each row of the 2×5 patch s_ij (eq. 1).
+  int patch_length = 5;
+  // σ_c of the colour term C^c (eq. 4).
+  double sigma_c = 0.025;
+  // Views within this angle of the reference view take part (§3.1: 5°).
+  double max_view_angle_deg = 5.0;
+  // Reference points (one pixel apart) sampled around the predicted match at
+  // each level after the first (§3.1: "sample K reference points around").
+  int refine_reference_points = 5;
+  // Gauss-Newton steps of the shift at the chosen reference point.
+  int shift_iterations = 3;
+  // A view's match further than this (pixels along ℓ) from the prediction is an outlier.
+  double outlier_pixels = 1.5;
+  // Depth search range of the first level (planar depth, metres). When
+  // max_depth <= 0 it is derived from V: [0.5 × nearest corner, 20 × farthest corner].
+  double min_depth = 0.0;
+  double max_depth = 0.0;
+  // Cap on the first level's reference points (K), for very wide ranges.
+  int max_reference_points = 512;
+  // Use every view within max_view_angle_deg (true) or only the nearest view
+  // on each side (false; the paper's first level alone).
+  bool use_hierarchy = true;
+
+  void Check() const;
+};
+
+// One view as the estimator sees it: undistorted geometry and a CV_32FC3 BGR
+// image in [0, 1].
+struct ViewImage {
+  PinholeView view;
+  cv::Mat image;
+};
+
+class GradientDepthEstimator {
+ public:
+  explicit GradientDepthEstimator(const GradientDepthOptions& options);
+
+  // Sparse depth of `reference` from `neighbors` (any order; those beyond
+  // max_view_angle_deg are ignored). Pixels without an estimate have depth 0.
+  // Never throws for degenerate input: no usable neighbour, a blank frame or
+  // coincident cameras give an empty map and a warning.
+  DepthMap Estimate(const ViewImage& reference, const std::vector<const ViewImage*>& neighbors,
+                    const BoundingBox& volume) const;
+
+  const GradientDepthOptions& options() const { return options_; }
+
+ private:
+  GradientDepthOptions options_;
+};
+
+// Grey-level gradient magnitude ‖∇I‖ per pixel (CV_32F), as the estimator thresholds it.
+cv::Mat GradientMagnitude(const cv::Mat& image_bgr);
+
+}  // namespace lfrecon

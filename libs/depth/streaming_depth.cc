@@ -1,0 +1,138 @@
+#include "depth/streaming_depth.h"
+
+#include <spdlog/spdlog.h>
+
+#include <algorithm>
+#include <map>
+#include <set>
+
+#include "geometry/view_graph.h"
+#include "util/error.h"
+#include "util/progress.h"
+
+namespace lfrecon {
+
+void StreamingDepthOptions::Check() const {
+  gradient.Check();
+  filter.Check();
+}
+
+StreamingDepth::StreamingDepth(std::vector<PinholeView> views, const BoundingBox& volume,
+                               const StreamingDepthOptions& options)
+    : views_(std::move(views)), volume_(volume), options_(options) {
+  options_.Check();
+}
+
+StreamingDepthStats StreamingDepth::Run(FrameSource& frames, const std::vector<int>& wanted_in, const Sink& sink) {
+  const int n = static_cast<int>(views_.size());
+  StreamingDepthStats stats;
+  std::vector<Eigen::Vector3d> dirs;
+  for (const auto& v : views_) dirs.push_back(v.ViewingDirection());
+  const ViewGraph near(dirs, options_.gradient.max_view_angle_deg);
+  const ViewGraph wide(dirs, options_.filter.max_view_angle_deg);
+
+  std::vector<int> wanted = wanted_in;
+  if (wanted.empty())
+    for (int i = 0; i < n; ++i) wanted.push_back(i);
+  for (int i : wanted)
+    if (i < 0 || i >= n) throw OptionError("view index " + std::to_string(i) + " out of range [0, " + std::to_string(n) + ")");
+
+  // Which sparse maps are needed, and when (after which frame) each can be computed.
+  std::vector<char> need_sparse(n, 0);
+  for (int i : wanted) {
+    need_sparse[i] = 1;
+    if (options_.run_filter)
+      for (int j : wide.Neighbors(i)) need_sparse[j] = 1;
+  }
+  std::vector<int> sparse_ready(n, -1);  // last frame index that sparse map s needs
+  std::vector<int> frame_last_use(n, -1);
+  for (int s = 0; s < n; ++s) {
+    if (!need_sparse[s]) continue;
+    int last = s;
+    for (int j : near.Neighbors(s)) last = std::max(last, j);
+    sparse_ready[s] = last;
+    frame_last_use[s] = std::max(frame_last_use[s], last);
+    for (int j : near.Neighbors(s)) frame_last_use[j] = std::max(frame_last_use[j], last);
+  }
+  std::vector<int> filter_ready(n, -1), sparse_last_use(n, -1);
+  std::vector<char> is_wanted(n, 0);
+  for (int i : wanted) {
+    is_wanted[i] = 1;
+    int last = sparse_ready[i];
+    if (options_.run_filter)
+      for (int j : wide.Neighbors(i)) last = std::max(last, sparse_ready[j]);
+    filter_ready[i] = last;
+    sparse_last_use[i] = std::max(sparse_last_use[i], last);
+    if (options_.run_filter)
+      for (int j : wide.Neighbors(i)) sparse_last_use[j] = std::max(sparse_last_use[j], last);
+  }
+  std::map<int, std::vector<int>> sparse_at, filter_at;  // frame index -> views that complete there
+  for (int s = 0; s < n; ++s)
+    if (need_sparse[s]) sparse_at[sparse_ready[s]].push_back(s);
+  for (int i : wanted) filter_at[filter_ready[i]].push_back(i);
+  int last_frame = -1;
+  for (int s = 0; s < n; ++s) last_frame = std::max(last_frame, sparse_ready[s]);
+
+  const GradientDepthEstimator estimator(options_.gradient);
+  std::unique_ptr<VoteGrid> grid;
+  std::set<int> in_grid;
+  if (options_.run_filter) grid = std::make_unique<VoteGrid>(volume_, options_.filter);
+
+  std::map<int, ViewImage> held;
+  std::map<int, DepthMap> sparse;
+  Progress progress("depth", static_cast<long long>(wanted.size()));
+  Frame frame;
+  for (int f = 0; f <= last_frame; ++f) {
+    if (!frames.Next(&frame)) throw InputError("frames", "stream ended after " + std::to_string(f) + " of " +
+                                                             std::to_string(n) + " frames");
+    ++stats.frames_read;
+    if (frame_last_use[f] >= f) held[f] = ViewImage{views_[f], frame.image};
+    stats.max_frames_held = std::max(stats.max_frames_held, static_cast<int>(held.size()));
+
+    for (int s : sparse_at[f]) {
+      Timer timer;
+      std::vector<const ViewImage*> nbs;
+      for (int j : near.Neighbors(s)) nbs.push_back(&held.at(j));
+      sparse[s] = estimator.Estimate(held.at(s), nbs, volume_);
+      stats.seconds_sparse += timer.Seconds();
+      ++stats.sparse_maps;
+    }
+    stats.max_sparse_held = std::max(stats.max_sparse_held, static_cast<int>(sparse.size()));
+    for (int i : filter_at[f]) {
+      DepthMap filtered;
+      if (options_.run_filter) {
+        Timer timer;
+        std::set<int> voters(wide.Neighbors(i).begin(), wide.Neighbors(i).end());
+        voters.insert(i);
+        for (auto it = in_grid.begin(); it != in_grid.end();) {
+          if (!voters.count(*it)) {
+            grid->Splat(sparse.at(*it), views_[*it], -1.0f);
+            it = in_grid.erase(it);
+          } else {
+            ++it;
+          }
+        }
+        for (int v : voters)
+          if (!in_grid.count(v)) {
+            grid->Splat(sparse.at(v), views_[v], 1.0f);
+            in_grid.insert(v);
+          }
+        filtered = grid->Filter(sparse.at(i), views_[i]);
+        stats.seconds_filter += timer.Seconds();
+        ++stats.filtered_maps;
+      }
+      sink(i, sparse.at(i), filtered);
+      progress.Advance();
+    }
+    // Release what no pending view needs any more.
+    for (auto it = held.begin(); it != held.end();) it = frame_last_use[it->first] <= f ? held.erase(it) : std::next(it);
+    for (auto it = sparse.begin(); it != sparse.end();) {
+      if (sparse_last_use[it->first] <= f && !in_grid.count(it->first)) it = sparse.erase(it);
+      else ++it;
+    }
+  }
+  progress.Finish();
+  return stats;
+}
+
+}  // namespace lfrecon

@@ -1,0 +1,52 @@
+#pragma once
+// Runs depth from gradients (§3.1) and voxel-vote filtering (§3.2) over a
+// frame stream in sequence order, holding only the frames and sparse maps the
+// pending views still need. All poses are known up front (they come with the
+// dataset), so each view's neighbourhoods are known before its frames arrive:
+// view i's sparse map is computed as soon as the last frame within 5° of it
+// has been read, and its filtered map as soon as the sparse maps of all views
+// within 15° exist. For a dense path that is a window of a few dozen frames.
+#include <functional>
+#include <vector>
+
+#include "depth/depth_filter.h"
+#include "depth/gradient_depth_estimator.h"
+#include "io/frame_source.h"
+
+namespace lfrecon {
+
+struct StreamingDepthOptions {
+  GradientDepthOptions gradient;
+  DepthFilterOptions filter;
+  bool run_filter = true;
+  void Check() const;
+};
+
+struct StreamingDepthStats {
+  int frames_read = 0;
+  int sparse_maps = 0;
+  int filtered_maps = 0;
+  int max_frames_held = 0;
+  int max_sparse_held = 0;
+  double seconds_sparse = 0;
+  double seconds_filter = 0;
+};
+
+class StreamingDepth {
+ public:
+  // view_index, sparse map, filtered map (empty if run_filter is false).
+  using Sink = std::function<void(int, const DepthMap&, const DepthMap&)>;
+
+  StreamingDepth(std::vector<PinholeView> views, const BoundingBox& volume, const StreamingDepthOptions& options);
+
+  // Reads `frames` in order (its frame k is view k) and calls `sink` for every
+  // view in `wanted` (all views when empty), in the order they complete.
+  StreamingDepthStats Run(FrameSource& frames, const std::vector<int>& wanted, const Sink& sink);
+
+ private:
+  std::vector<PinholeView> views_;
+  BoundingBox volume_;
+  StreamingDepthOptions options_;
+};
+
+}  // namespace lfrecon
