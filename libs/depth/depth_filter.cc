@@ -131,6 +131,10 @@ DepthMap VoteGrid::Filter(const DepthMap& map, const PinholeView& view) const {
         double offset = 0;
         if (denom < 0) offset = std::clamp(0.5 * (best_prev - best_next) / denom, -0.5, 0.5);
         out.depth.at<float>(r, col) = static_cast<float>(best_d + offset * step);
+        // Multi-view support of the chosen point joins the pixel's own confidence.
+        if (options_.confidence_from_votes)
+          out.confidence.at<float>(r, col) =
+              map.confidence.at<float>(r, col) * std::min(1.0f, best / static_cast<float>(options_.votes_saturation));
       }
     }
   });

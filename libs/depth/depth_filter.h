@@ -31,6 +31,9 @@ struct DepthFilterOptions {
   // Only move a pixel if the voted depth is within this factor of its own
   // (relative); further ones are removed as outliers. <= 0: no limit.
   double max_relative_move = 0.05;
+  // Multiply the confidence by min(1, votes / votes_saturation) at the chosen point.
+  bool confidence_from_votes = true;
+  double votes_saturation = 10.0;
   void Check() const;
 };
 

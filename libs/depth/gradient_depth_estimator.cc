@@ -110,7 +110,8 @@ class PixelSolver {
   PixelSolver(const GradientDepthOptions& o, const cv::Mat& ref_image, const Eigen::Vector2d& p,
               const Eigen::Vector3f& ref_colour)
       : o_(o), ref_(ref_image), p_(p), ref_colour_(ref_colour), half_(o.patch_length / 2),
-        inv_two_sigma_c2_(1.0 / (2.0 * o.sigma_c * o.sigma_c)) {}
+        inv_two_sigma_c2_(1.0 / (2.0 * o.sigma_c * o.sigma_c)),
+        inv_irls_scale2_(1.0 / (o.irls_scale * o.irls_scale)) {}
 
   // The 2×5 patch at line coordinate s (reference depth D(s)) and its least-squares shift.
   ShiftMeasurement Measure(const EpipolarRay& ray, double s) const {
@@ -126,15 +127,32 @@ class PixelSolver {
       const Eigen::Vector2d x = ray.BackToReference(y, d);
       if (!SampleBilinear3(ref_, x.x(), x.y(), &si[k])) return m;
     }
-    double sxy = 0, sxx = 0;
+    // Least-squares shift over the interior columns (eq. 2-3 in robust form),
+    // then iteratively reweighted: at silhouettes part of the patch shows the
+    // background moving at another speed, and those columns fit badly.
+    Eigen::Vector3f gx[9], gy[9];
     for (int k = 1; k + 1 < L; ++k) {
-      const Eigen::Vector3f gx = 0.25f * (si[k + 1] - si[k - 1] + sj[k + 1] - sj[k - 1]);
-      const Eigen::Vector3f gy = sj[k] - si[k];
-      sxy += gx.dot(gy);
-      sxx += gx.squaredNorm();
+      gx[k] = 0.25f * (si[k + 1] - si[k - 1] + sj[k + 1] - sj[k - 1]);
+      gy[k] = sj[k] - si[k];
     }
-    if (!(sxx > 1e-12)) return m;
-    m.shift = -sxy / sxx;
+    double w[9];
+    for (int k = 1; k + 1 < L; ++k) w[k] = 1.0;
+    double sxx = 0, shift = 0;
+    for (int irls = 0; irls < 1 + o_.irls_iterations; ++irls) {
+      double sxy = 0;
+      sxx = 0;
+      for (int k = 1; k + 1 < L; ++k) {
+        sxy += w[k] * gx[k].dot(gy[k]);
+        sxx += w[k] * gx[k].squaredNorm();
+      }
+      if (!(sxx > 1e-12)) return m;
+      shift = -sxy / sxx;
+      for (int k = 1; k + 1 < L; ++k) {
+        const double e2 = (gy[k] + static_cast<float>(shift) * gx[k]).squaredNorm();
+        w[k] = 1.0 / (1.0 + e2 * inv_irls_scale2_);
+      }
+    }
+    m.shift = shift;
     m.energy = sxx;
     m.valid = std::isfinite(m.shift);
     if (!m.valid) return m;
@@ -192,6 +210,7 @@ class PixelSolver {
   Eigen::Vector3f ref_colour_;
   int half_;
   double inv_two_sigma_c2_;
+  double inv_irls_scale2_;
 };
 
 }  // namespace
@@ -307,9 +326,18 @@ DepthMap GradientDepthEstimator::Estimate(const ViewImage& reference, const std:
             if (!m.valid || std::abs(m.shift) > 2.0) continue;
             const double d = ray.Depth(s_near + k + m.shift);
             if (!(d > 0)) continue;
+            // Own C = C^c·C^d, times the mean colour agreement over every
+            // neighbour: a repeated texture rarely agrees in all of them.
             double score = m.colour * std::exp(-m.shift * m.shift);
-            for (size_t g = 0; g < first_level.size(); ++g)
-              if (g != f && ray_ok[first_level[g]]) score *= solver.ColourAt(rays[first_level[g]], d);
+            if (score <= best_score) continue;
+            double agree = 0;
+            int views_seen = 0;
+            for (size_t g = 0; g < pairs.size(); ++g) {
+              if (!ray_ok[g] || static_cast<int>(g) == first_level[f]) continue;
+              agree += solver.ColourAt(rays[g], d);
+              ++views_seen;
+            }
+            if (views_seen > 0) score *= agree / views_seen;
             if (score > best_score) {
               best_score = score;
               best_depth = d;
@@ -320,10 +348,16 @@ DepthMap GradientDepthEstimator::Estimate(const ViewImage& reference, const std:
 
         // All levels, nearest first: search around the prediction, refine the
         // shift, and fuse the views' depths weighted by their information.
-        double depth = best_depth, sum_w = 0, sum_wd = 0, sum_conf = 0;
-        int used = 0, tried = 0;
+        double depth = best_depth, sum_w = 0, sum_wd = 0;
+        int tried = 0;
+        struct ViewMatch {
+          int k;
+          double s, d, energy, c;
+        };
+        ViewMatch matches[64];
+        int num_matches = 0;
         for (int k : order) {
-          if (!ray_ok[k]) continue;
+          if (!ray_ok[k] || num_matches == 64) continue;
           const EpipolarRay& ray = rays[k];
           if (!ray.InFront(depth)) continue;
           ++tried;
@@ -338,12 +372,41 @@ DepthMap GradientDepthEstimator::Estimate(const ViewImage& reference, const std:
           const double wgt = m.energy * slope * slope;
           sum_w += wgt;
           sum_wd += wgt * d;
-          sum_conf += m.colour * std::exp(-m.shift * m.shift);
-          ++used;
+          matches[num_matches++] = {k, s, d, m.energy, m.colour * std::exp(-m.shift * m.shift)};
           depth = sum_wd / sum_w;
         }
-        if (used == 0 || !(depth > 0) || !std::isfinite(depth)) continue;
-        const float conf = static_cast<float>(sum_conf / std::max(tried, 1));
+        if (num_matches == 0 || !(depth > 0) || !std::isfinite(depth)) continue;
+        // Final robust fit: views whose match is more than inlier_pixels from
+        // the fused depth's prediction are dropped, and the rest refitted.
+        double rms = 0, sum_c = 0;
+        for (int round = 0; round < 2; ++round) {
+          double w_sum = 0, wd_sum = 0, r2_sum = 0;
+          sum_c = 0;
+          int inliers = 0;
+          for (int q = 0; q < num_matches; ++q) {
+            const EpipolarRay& ray = rays[matches[q].k];
+            const double res = ray.S(depth) - matches[q].s;
+            if (std::abs(res) > o.inlier_pixels) continue;
+            const double slope = ray.dSdd(matches[q].d);
+            const double wgt = matches[q].energy * slope * slope;
+            w_sum += wgt;
+            wd_sum += wgt * matches[q].d;
+            r2_sum += res * res;
+            sum_c += matches[q].c;
+            ++inliers;
+          }
+          if (inliers == 0) {
+            depth = -1;
+            break;
+          }
+          depth = wd_sum / w_sum;
+          rms = std::sqrt(r2_sum / inliers);
+        }
+        if (!(depth > 0) || !std::isfinite(depth)) continue;
+        // Confidence: colour/shift agreement of the inlier views over all views
+        // tried (eq. 4-5), lowered when their matches scatter around the fit.
+        const float conf = static_cast<float>(sum_c / std::max(tried, 1) *
+                                              std::exp(-rms * rms / (2.0 * o.sigma_match * o.sigma_match)));
         out.depth.at<float>(r, c) = static_cast<float>(depth);
         out.confidence.at<float>(r, c) = conf;
         out.label.at<std::uint8_t>(r, c) = static_cast<std::uint8_t>(

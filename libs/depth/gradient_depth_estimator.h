@@ -36,6 +36,15 @@ struct GradientDepthOptions {
   int refine_reference_points = 5;
   // Gauss-Newton steps of the shift at the chosen reference point.
   int shift_iterations = 3;
+  // Reweighting rounds of the shift fit, and the residual scale (colour units)
+  // above which a column counts as an outlier.
+  int irls_iterations = 0;
+  double irls_scale = 0.05;
+  // Final fit: views whose match lies further than this from the fused
+  // depth's prediction (pixels along ℓ) are dropped; σ of the scatter term
+  // of the confidence (pixels).
+  double inlier_pixels = 0.75;
+  double sigma_match = 0.25;
   // A view's match further than this (pixels along ℓ) from the prediction is an outlier.
   double outlier_pixels = 1.5;
   // Depth search range of the first level (planar depth, metres). When

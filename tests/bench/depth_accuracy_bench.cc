@@ -73,6 +73,32 @@ int main(int argc, char** argv) {
       std::printf(" | filtered accuracy %.3f coverage %.3f", mf.Accuracy(), mf.Coverage());
     }
     std::printf("\n");
+    if (getenv("LFRECON_BENCH_HIST")) {
+      // Relative error histogram of sparse foreground estimates, for diagnosis.
+      int bins[6] = {0}, disc_bins[6] = {0};
+      const double edges[5] = {0.005, 0.01, 0.02, 0.05, 0.2};
+      for (int r = 0; r < gt.rows; ++r)
+        for (int c = 0; c < gt.cols; ++c) {
+          const float t = gt.at<float>(r, c), e = sp.depth.at<float>(r, c);
+          if (!(t > 0) || !(e > 0)) continue;
+          if (!ds.bbox().Contains(views[i].Unproject(Eigen::Vector2d(c + 0.5, r + 0.5), t))) continue;
+          const double rel = std::abs(e - t) / t;
+          int b = 0;
+          while (b < 5 && rel > edges[b]) ++b;
+          bool disc = false;  // a depth discontinuity within 2 px
+          for (int dr = -2; dr <= 2; ++dr)
+            for (int dc = -2; dc <= 2; ++dc) {
+              const int rr = std::clamp(r + dr, 0, gt.rows - 1), cc = std::clamp(c + dc, 0, gt.cols - 1);
+              const float o = gt.at<float>(rr, cc);
+              if (!(o > 0) || std::abs(o - t) > 0.02 * t) disc = true;
+            }
+          ++(disc ? disc_bins : bins)[b];
+        }
+      std::printf("  smooth:  rel err <0.5%% %d, <1%% %d, <2%% %d, <5%% %d, <20%% %d, more %d\n", bins[0], bins[1],
+                  bins[2], bins[3], bins[4], bins[5]);
+      std::printf("  near discontinuity: <0.5%% %d, <1%% %d, <2%% %d, <5%% %d, <20%% %d, more %d\n", disc_bins[0],
+                  disc_bins[1], disc_bins[2], disc_bins[3], disc_bins[4], disc_bins[5]);
+    }
     std::fflush(stdout);
   });
   const double total = timer.Seconds();
