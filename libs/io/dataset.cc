@@ -1,0 +1,437 @@
+#include "io/dataset.h"
+
+#include <spdlog/spdlog.h>
+
+#include <Eigen/Dense>
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <fstream>
+#include <map>
+#include <nlohmann/json.hpp>
+#include <set>
+
+#include "geometry/undistorter.h"
+#include "io/colmap_model.h"
+#include "io/transforms_json.h"
+#include "util/error.h"
+
+namespace lfrecon {
+namespace fs = std::filesystem;
+using nlohmann::json;
+
+namespace {
+
+bool IsDir(const fs::path& p) {
+  std::error_code ec;
+  return fs::is_directory(p, ec);
+}
+bool IsFile(const fs::path& p) {
+  std::error_code ec;
+  return fs::is_regular_file(p, ec);
+}
+
+bool SameCamera(const Camera& a, const Camera& b) {
+  return a.model == b.model && a.width == b.width && a.height == b.height && a.params == b.params;
+}
+
+// `path` relative to `dir` if it lies inside it, else empty.
+std::string RelativeInside(const fs::path& path, const fs::path& dir) {
+  std::error_code ec;
+  const fs::path rel = fs::weakly_canonical(path, ec).lexically_relative(fs::weakly_canonical(dir, ec));
+  if (ec || rel.empty() || *rel.begin() == "..") return "";
+  return rel.generic_string();
+}
+
+// transforms.json paths often omit the extension ("images/00000"): try the usual ones.
+std::optional<fs::path> ExistingImage(const fs::path& p) {
+  if (IsFile(p)) return p;
+  for (const char* ext :
+       {".png", ".jpg", ".jpeg", ".PNG", ".JPG", ".JPEG", ".exr", ".tif", ".tiff", ".bmp"}) {
+    fs::path q = p;
+    q += ext;
+    if (IsFile(q)) return q;
+  }
+  return std::nullopt;
+}
+
+// The name (relative to `images_dir`) of the image a transforms.json file_path
+// refers to. file_path is relative to the transforms file's folder; if that
+// does not land in `images_dir`, its trailing components are tried there.
+std::string ResolveTransformsImage(const std::string& file_path, const fs::path& base,
+                                   const fs::path& images_dir) {
+  const fs::path fp = fs::path(file_path).lexically_normal();
+  if (auto p = ExistingImage(fp.is_absolute() ? fp : base / fp)) {
+    const std::string rel = RelativeInside(*p, images_dir);
+    if (!rel.empty()) return rel;
+  }
+  std::vector<fs::path> parts(fp.begin(), fp.end());
+  for (size_t k = 0; k < parts.size(); ++k) {
+    fs::path sub;
+    for (size_t m = k; m < parts.size(); ++m) sub /= parts[m];
+    if (sub.empty() || *sub.begin() == ".." || sub.is_absolute()) continue;
+    if (auto p = ExistingImage(images_dir / sub)) return RelativeInside(*p, images_dir);
+  }
+  return "";
+}
+
+// Reads frames through an image list or a video and hands out undistorted,
+// size-checked frames in the order of the dataset's views.
+class DatasetFrameSource : public FrameSource {
+ public:
+  DatasetFrameSource(std::vector<DatasetView> views, fs::path images_dir, fs::path video_path)
+      : views_(std::move(views)), images_dir_(std::move(images_dir)), video_path_(std::move(video_path)) {
+    if (!video_path_.empty()) {
+      inner_ = std::make_unique<VideoSource>(video_path_);
+    } else {
+      std::vector<std::string> names;
+      for (const DatasetView& v : views_) names.push_back(v.name);
+      inner_ = std::make_unique<ImageFolderSource>(images_dir_, std::move(names));
+    }
+  }
+
+  int NumFrames() const override { return static_cast<int>(views_.size()); }
+
+  bool Next(Frame* frame) override {
+    if (next_ >= NumFrames()) return false;
+    if (!inner_->Next(frame))
+      throw InputError(video_path_.string(), "video ended after " + std::to_string(next_) +
+                                                 " frames, but there are " + std::to_string(NumFrames()) +
+                                                 " poses");
+    Finish(next_, frame);
+    ++next_;
+    return true;
+  }
+
+  Frame Read(int index) override {
+    if (index < 0 || index >= NumFrames())
+      throw InputError(Source().string(), "frame index " + std::to_string(index) + " out of range [0, " +
+                                              std::to_string(NumFrames()) + ")");
+    Frame frame = inner_->Read(index);
+    Finish(index, &frame);
+    return frame;
+  }
+
+ private:
+  fs::path Source() const { return video_path_.empty() ? images_dir_ : video_path_; }
+
+  void Finish(int index, Frame* frame) {
+    const DatasetView& view = views_[index];
+    const Camera& camera = view.camera;
+    if (frame->image.cols != camera.width || frame->image.rows != camera.height) {
+      const std::string file =
+          video_path_.empty() ? (images_dir_ / view.name).string() : video_path_.string();
+      const std::string field = video_path_.empty() ? "" : "frame " + std::to_string(index);
+      throw InputError(file, field,
+                       "image is " + std::to_string(frame->image.cols) + "x" +
+                           std::to_string(frame->image.rows) + " but its camera (" + view.name + ") is " +
+                           std::to_string(camera.width) + "x" + std::to_string(camera.height));
+    }
+    frame->index = index;
+    frame->name = view.name;
+    frame->image = UndistorterFor(camera).Apply(frame->image);
+  }
+
+  const Undistorter& UndistorterFor(const Camera& camera) {
+    for (const auto& [cam, undistorter] : undistorters_)
+      if (SameCamera(cam, camera)) return *undistorter;
+    undistorters_.emplace_back(camera, std::make_unique<Undistorter>(camera));
+    return *undistorters_.back().second;
+  }
+
+  std::vector<DatasetView> views_;
+  fs::path images_dir_;
+  fs::path video_path_;
+  std::unique_ptr<FrameSource> inner_;
+  std::vector<std::pair<Camera, std::unique_ptr<Undistorter>>> undistorters_;
+  int next_ = 0;
+};
+
+struct PoseEntry {
+  std::string name;
+  Camera camera;
+  Rigid3d cam_from_world;
+};
+
+}  // namespace
+
+void DatasetOptions::Check() const {
+  if (!images_dir.empty() && !video_path.empty())
+    throw OptionError("give either an image folder (--images) or a video (--video), not both");
+  if (!colmap_dir.empty() && !transforms_path.empty())
+    throw OptionError("give either a COLMAP model (--colmap) or a transforms.json (--transforms), not both");
+  if (dataset_dir.empty()) {
+    if (images_dir.empty() && video_path.empty())
+      throw OptionError("no input: give a dataset folder, or --images/--video with --colmap/--transforms");
+    if (colmap_dir.empty() && transforms_path.empty())
+      throw OptionError(
+          "no poses: give --colmap or --transforms with --images/--video (or a dataset folder)");
+  }
+  if (bbox && !bbox->IsValid()) throw OptionError("--bbox: min must be finite and below max on every axis");
+}
+
+Dataset Dataset::Open(const DatasetOptions& options) {
+  options.Check();
+  Dataset ds;
+  const fs::path& root = options.dataset_dir;
+  if (!root.empty()) {
+    if (!IsDir(root)) throw InputError(root.string(), "dataset folder does not exist");
+    ds.root_ = root;
+  }
+
+  // Where the poses come from: explicit, else COLMAP in the dataset folder, else its transforms.json.
+  fs::path model_dir, transforms_path = options.transforms_path;
+  if (!options.colmap_dir.empty()) {
+    if (!IsDir(options.colmap_dir))
+      throw InputError(options.colmap_dir.string(), "COLMAP model folder does not exist");
+    model_dir = FindColmapModel(options.colmap_dir);
+    if (model_dir.empty())
+      throw InputError(options.colmap_dir.string(),
+                       "no COLMAP model (cameras + images, .txt or .bin) here, in sparse/ or in sparse/0/");
+  } else if (!transforms_path.empty()) {
+    if (!IsFile(transforms_path))
+      throw InputError(transforms_path.string(), "transforms file does not exist");
+  } else {
+    model_dir = FindColmapModel(root);
+    if (model_dir.empty()) {
+      if (!IsFile(root / "transforms.json"))
+        throw InputError(root.string(),
+                         "no poses: expected a COLMAP model in sparse/ or sparse/0/, or transforms.json");
+      transforms_path = root / "transforms.json";
+    } else if (IsFile(root / "transforms.json")) {
+      spdlog::info("{}: using the COLMAP model in {}, not transforms.json", root.string(),
+                   model_dir.string());
+    }
+  }
+
+  // Where the frames come from: --video, --images, else the dataset's images/ (for a
+  // transforms.json without images/, NeRF-synthetic style, its file_paths from the dataset folder).
+  if (!options.video_path.empty()) {
+    if (!IsFile(options.video_path))
+      throw InputError(options.video_path.string(), "video file does not exist");
+    ds.video_path_ = options.video_path;
+  } else if (!options.images_dir.empty()) {
+    ds.images_dir_ = options.images_dir;
+  } else if (model_dir.empty() && !IsDir(root / "images")) {
+    ds.images_dir_ = root;
+  } else {
+    ds.images_dir_ = root / "images";
+  }
+  if (ds.video_path_.empty() && !IsDir(ds.images_dir_))
+    throw InputError(ds.images_dir_.string(), "image folder does not exist");
+
+  std::vector<PoseEntry> entries;
+  std::string pose_file;  // for messages
+  if (!model_dir.empty()) {
+    const bool binary = IsColmapModelBinary(model_dir);
+    ds.pose_source_ = binary ? "colmap-binary" : "colmap-text";
+    pose_file = (model_dir / (binary ? "images.bin" : "images.txt")).string();
+    const ColmapModel model = ReadColmapModel(model_dir);
+    for (const ColmapImage& image : model.images)
+      entries.push_back({image.name, model.cameras.at(image.camera_id), image.cam_from_world});
+  } else {
+    ds.pose_source_ = "transforms.json";
+    pose_file = transforms_path.string();
+    const std::vector<TransformsFrame> frames = ReadTransformsJson(transforms_path);
+    const fs::path base = transforms_path.parent_path();
+    for (size_t i = 0; i < frames.size(); ++i) {
+      std::string name = frames[i].file_path;
+      if (ds.video_path_.empty()) {
+        name = ResolveTransformsImage(frames[i].file_path, base, ds.images_dir_);
+        if (name.empty())
+          throw InputError(pose_file, "frames[" + std::to_string(i) + "].file_path",
+                           "'" + frames[i].file_path + "' matches no image in " + ds.images_dir_.string());
+      }
+      entries.push_back({name, frames[i].camera, frames[i].cam_from_world});
+    }
+  }
+  if (entries.empty()) throw InputError(pose_file, "no poses in the file");
+
+  std::sort(entries.begin(), entries.end(),
+            [](const PoseEntry& a, const PoseEntry& b) { return NaturalNameLess(a.name, b.name); });
+  for (size_t i = 1; i < entries.size(); ++i)
+    if (entries[i].name == entries[i - 1].name)
+      throw InputError(pose_file, "'" + entries[i].name + "' has two poses");
+
+  if (ds.video_path_.empty()) {
+    // Every pose needs its image; images without a pose are left out (COLMAP
+    // often fails to register a few frames), with a warning.
+    std::set<std::string> posed;
+    for (const PoseEntry& e : entries) {
+      if (!IsFile(ds.images_dir_ / e.name))
+        throw InputError((ds.images_dir_ / e.name).string(),
+                         "image listed in " + pose_file + " does not exist");
+      posed.insert(e.name);
+    }
+    const auto all = ImageFolderSource::FromFolder(ds.images_dir_);
+    std::vector<std::string> unposed;
+    for (const std::string& n : all->names())
+      if (!posed.count(n)) unposed.push_back(n);
+    if (!unposed.empty())
+      spdlog::warn("{}: {} images have no pose and are skipped (first: {})", ds.images_dir_.string(),
+                   unposed.size(), unposed.front());
+  } else {
+    // A video has no names: view k is frame k, so every frame needs a pose.
+    VideoSource video(ds.video_path_);
+    if (video.NumFrames() > 0 && video.NumFrames() != static_cast<int>(entries.size()))
+      throw InputError(ds.video_path_.string(), "video has " + std::to_string(video.NumFrames()) +
+                                                    " frames but " + pose_file + " gives " +
+                                                    std::to_string(entries.size()) +
+                                                    " poses; with a video, frame k takes the k-th pose in "
+                                                    "name order, so the counts must agree");
+  }
+
+  for (size_t i = 0; i < entries.size(); ++i) {
+    DatasetView v;
+    v.index = static_cast<int>(i);
+    v.name = std::move(entries[i].name);
+    v.camera = std::move(entries[i].camera);
+    v.cam_from_world = entries[i].cam_from_world;
+    ds.views_.push_back(std::move(v));
+  }
+
+  // The foreground volume V.
+  if (options.bbox) {
+    ds.bbox_ = *options.bbox;
+    ds.bbox_source_ = "--bbox";
+  } else {
+    bool from_scene = false;
+    if (!root.empty() && IsFile(root / "scene.json")) {
+      std::ifstream in(root / "scene.json");
+      const json scene = json::parse(in, nullptr, /*allow_exceptions=*/false);
+      // A scene.json without the keys is not an error: V is then estimated.
+      if (scene.is_object() &&
+          (scene.contains("foreground_bbox_min") || scene.contains("foreground_bbox_max"))) {
+        ds.bbox_ = ReadSceneJsonBoundingBox(root / "scene.json");
+        from_scene = true;
+      } else if (!scene.is_object()) {
+        throw InputError((root / "scene.json").string(), "not a valid JSON object");
+      }
+    }
+    if (from_scene) {
+      ds.bbox_source_ = "scene.json";
+    } else {
+      ds.bbox_ = EstimateBoundingBox(ds.views_);
+      ds.bbox_source_ = "estimated";
+    }
+  }
+  spdlog::info("{}: {} views, poses from {}, V from {}: [{:.3f} {:.3f} {:.3f}] - [{:.3f} {:.3f} {:.3f}]",
+               root.empty() ? (ds.video_path_.empty() ? ds.images_dir_.string() : ds.video_path_.string())
+                            : root.string(),
+               ds.views_.size(), ds.pose_source_, ds.bbox_source_, ds.bbox_.min.x(), ds.bbox_.min.y(),
+               ds.bbox_.min.z(), ds.bbox_.max.x(), ds.bbox_.max.y(), ds.bbox_.max.z());
+  return ds;
+}
+
+fs::path Dataset::ImagePath(int i) const {
+  if (images_dir_.empty()) return {};
+  return images_dir_ / views_.at(i).name;
+}
+
+Camera Dataset::UndistortedCamera(int i) const {
+  // As Undistorter does (same focal lengths and principal point), without building its maps.
+  const Camera& c = views_.at(i).camera;
+  return Camera::Pinhole(c.width, c.height, c.fx(), c.fy(), c.cx(), c.cy());
+}
+
+PinholeView Dataset::View(int i) const {
+  return PinholeView(UndistortedCamera(i), views_.at(i).cam_from_world);
+}
+
+std::unique_ptr<FrameSource> Dataset::OpenFrames() const {
+  return std::make_unique<DatasetFrameSource>(views_, images_dir_, video_path_);
+}
+
+std::optional<fs::path> Dataset::GroundTruthDepthPath(int i) const {
+  if (root_.empty() || i < 0) return std::nullopt;
+  char name[32];
+  std::snprintf(name, sizeof(name), "depth_%04d.exr", i);
+  const fs::path p = root_ / "depth" / name;
+  if (!IsFile(p)) return std::nullopt;
+  return p;
+}
+
+std::optional<fs::path> Dataset::GroundTruthMeshPath(bool thin_only) const {
+  if (root_.empty()) return std::nullopt;
+  const fs::path p = root_ / (thin_only ? "gt_thin.ply" : "gt_mesh.ply");
+  if (!IsFile(p)) return std::nullopt;
+  return p;
+}
+
+BoundingBox ReadSceneJsonBoundingBox(const fs::path& path) {
+  const std::string file = path.string();
+  std::ifstream in(path);
+  if (!in) throw InputError(file, "cannot open file");
+  json scene;
+  try {
+    scene = json::parse(in);
+  } catch (const json::exception& e) {
+    throw InputError(file, std::string("not valid JSON: ") + e.what());
+  }
+  auto vec = [&](const char* key) {
+    if (!scene.is_object() || !scene.contains(key)) throw InputError(file, key, "missing");
+    const json& a = scene[key];
+    if (!a.is_array() || a.size() != 3) throw InputError(file, key, "must be an array of 3 numbers");
+    Eigen::Vector3d v;
+    for (int k = 0; k < 3; ++k) {
+      if (!a[k].is_number()) throw InputError(file, key, "must be an array of 3 numbers");
+      v[k] = a[k].get<double>();
+    }
+    return v;
+  };
+  BoundingBox box;
+  box.min = vec("foreground_bbox_min");
+  box.max = vec("foreground_bbox_max");
+  if (!box.IsValid())
+    throw InputError(file, "foreground_bbox_min/max", "min must be finite and below max on every axis");
+  return box;
+}
+
+BoundingBox EstimateBoundingBox(const std::vector<DatasetView>& views) {
+  if (views.empty()) throw std::invalid_argument("EstimateBoundingBox needs at least one view");
+  // Least-squares point nearest to all optical axes: sum_i (I - d_i d_i^T)(p - c_i) = 0.
+  Eigen::Matrix3d A = Eigen::Matrix3d::Zero();
+  Eigen::Vector3d b = Eigen::Vector3d::Zero();
+  Eigen::Vector3d mean_center = Eigen::Vector3d::Zero(), mean_dir = Eigen::Vector3d::Zero();
+  for (const DatasetView& v : views) {
+    const Eigen::Vector3d c = CameraCenter(v.cam_from_world);
+    const Eigen::Vector3d d = ViewingDirection(v.cam_from_world);
+    const Eigen::Matrix3d P = Eigen::Matrix3d::Identity() - d * d.transpose();
+    A += P;
+    b += P * c;
+    mean_center += c;
+    mean_dir += d;
+  }
+  const double n = static_cast<double>(views.size());
+  mean_center /= n;
+  Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eig(A / n);
+  Eigen::Vector3d center;
+  if (eig.eigenvalues().minCoeff() > 1e-4) {
+    center = A.ldlt().solve(b);
+  } else {
+    // Axes (nearly) parallel: no common look-at point; take one unit ahead of the mean camera.
+    spdlog::warn("EstimateBoundingBox: the cameras' optical axes are nearly parallel; V is a guess");
+    center = mean_center + (mean_dir.norm() > 0 ? mean_dir.normalized() : Eigen::Vector3d::UnitZ());
+  }
+  std::vector<double> distances, half_fovs;
+  for (const DatasetView& v : views) {
+    distances.push_back((center - CameraCenter(v.cam_from_world)).dot(ViewingDirection(v.cam_from_world)));
+    const Camera& c = v.camera;
+    half_fovs.push_back(std::min(std::atan(0.5 * c.width / c.fx()), std::atan(0.5 * c.height / c.fy())));
+  }
+  auto median = [](std::vector<double> x) {
+    std::nth_element(x.begin(), x.begin() + x.size() / 2, x.end());
+    return x[x.size() / 2];
+  };
+  double distance = median(distances);
+  if (!(distance > 0)) distance = (center - mean_center).norm();
+  if (!(distance > 0)) distance = 1.0;
+  // The cube seen whole by a camera at the median distance with the narrower field of view.
+  const double half = distance * std::tan(median(half_fovs));
+  BoundingBox box;
+  box.min = center - Eigen::Vector3d::Constant(half);
+  box.max = center + Eigen::Vector3d::Constant(half);
+  return box;
+}
+
+}  // namespace lfrecon

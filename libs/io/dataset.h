@@ -1,0 +1,89 @@
+#pragma once
+// A light-field dataset: an ordered sequence of views (image name, camera,
+// pose), a lazily read stream of their frames, and the foreground volume V.
+//
+// Dataset::Open accepts either a folder laid out like ../shared/data/figurines
+// (images/ + sparse/ or sparse/0/ (COLMAP text or binary) or transforms.json,
+// optional scene.json, depth/, gt_mesh.ply, gt_thin.ply), or explicit sources
+// (--images or --video, with --colmap or --transforms). V comes from --bbox,
+// else scene.json, else is estimated from where the cameras look.
+// Problems throw InputError naming the file and field.
+#include <filesystem>
+#include <memory>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "geometry/camera.h"
+#include "geometry/pinhole_view.h"
+#include "geometry/rigid3.h"
+#include "geometry/triangle_mesh.h"
+#include "io/frame_source.h"
+
+namespace lfrecon {
+
+struct DatasetOptions {
+  std::filesystem::path dataset_dir;      // auto-detected layout
+  std::filesystem::path images_dir;       // explicit image folder
+  std::filesystem::path video_path;       // explicit video file
+  std::filesystem::path colmap_dir;       // explicit COLMAP model folder (or its parent)
+  std::filesystem::path transforms_path;  // explicit transforms.json
+  std::optional<BoundingBox> bbox;        // explicit V (world, metres)
+
+  // Throws OptionError if the combination is not usable.
+  void Check() const;
+};
+
+struct DatasetView {
+  int index = 0;     // position in the sequence (0-based)
+  std::string name;  // image name relative to the image folder
+  Camera camera;     // as given (may have distortion)
+  Rigid3d cam_from_world;
+};
+
+class Dataset {
+ public:
+  static Dataset Open(const DatasetOptions& options);
+
+  const std::vector<DatasetView>& views() const { return views_; }
+  int NumViews() const { return static_cast<int>(views_.size()); }
+  const BoundingBox& bbox() const { return bbox_; }
+  const std::string& bbox_source() const { return bbox_source_; }  // "--bbox", "scene.json" or "estimated"
+  const std::string& pose_source() const { return pose_source_; }  // "colmap-text", "colmap-binary", "transforms.json"
+  const std::filesystem::path& root() const { return root_; }      // dataset folder (empty for explicit sources)
+  const std::filesystem::path& images_dir() const { return images_dir_; }  // empty when frames come from a video
+  const std::filesystem::path& video_path() const { return video_path_; }  // empty when frames come from images
+  // The image file of view i (empty path for video input).
+  std::filesystem::path ImagePath(int i) const;
+
+  // The distortion-free camera of view i after ingest, and its geometry.
+  Camera UndistortedCamera(int i) const;
+  PinholeView View(int i) const;
+
+  // Frames in the order of views(), undistorted, each checked against its
+  // camera's size (InputError naming the file otherwise).
+  std::unique_ptr<FrameSource> OpenFrames() const;
+
+  // Ground truth shipped with a dataset (figurines and the synthetic generator):
+  // depth/depth_NNNN.exr for sequence index NNNN, gt_mesh.ply, gt_thin.ply.
+  std::optional<std::filesystem::path> GroundTruthDepthPath(int i) const;
+  std::optional<std::filesystem::path> GroundTruthMeshPath(bool thin_only = false) const;
+
+ private:
+  std::vector<DatasetView> views_;
+  BoundingBox bbox_;
+  std::string bbox_source_;
+  std::string pose_source_;
+  std::filesystem::path root_;
+  std::filesystem::path images_dir_;
+  std::filesystem::path video_path_;
+};
+
+// V from scene.json's foreground_bbox_min/max; throws InputError if absent or malformed.
+BoundingBox ReadSceneJsonBoundingBox(const std::filesystem::path& path);
+// V estimated from the cameras: a cube around the point closest (least
+// squares) to all optical axes, sized from the median viewing distance and
+// the field of view.
+BoundingBox EstimateBoundingBox(const std::vector<DatasetView>& views);
+
+}  // namespace lfrecon

@@ -1,0 +1,248 @@
+#include "io/depth_map_io.h"
+
+#include <algorithm>
+#include <cctype>
+#include <cmath>
+#include <cstdlib>
+#include <cstring>
+#include <fstream>
+#include <iterator>
+#include <limits>
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
+#include <string>
+
+#include "util/error.h"
+
+namespace lfrecon {
+namespace fs = std::filesystem;
+
+namespace {
+
+std::string Lower(std::string s) {
+  std::transform(s.begin(), s.end(), s.begin(), [](unsigned char c) { return std::tolower(c); });
+  return s;
+}
+
+cv::Mat ToFloat32(const cv::Mat& map) {
+  cv::Mat f;
+  if (map.depth() == CV_32F)
+    f = map;
+  else
+    map.convertTo(f, CV_32F);
+  return f.isContinuous() ? f : f.clone();
+}
+
+}  // namespace
+
+void EnableOpenCvExr() {
+  // A function-local static runs once, thread-safely, before the first EXR call.
+  static const bool enabled = [] {
+    setenv("OPENCV_IO_ENABLE_OPENEXR", "1", 1);
+    return true;
+  }();
+  (void)enabled;
+}
+
+// ---------------------------------------------------------------------------
+// PFM
+
+void WritePfm(const fs::path& path, const cv::Mat& map) {
+  if (map.empty()) throw InputError(path.string(), "refusing to write an empty map");
+  if (map.channels() != 1 && map.channels() != 3)
+    throw InputError(path.string(), "PFM holds 1 or 3 channels, got " + std::to_string(map.channels()));
+  cv::Mat f = ToFloat32(map);
+  if (f.channels() == 3) {
+    cv::Mat rgb;
+    cv::cvtColor(f, rgb, cv::COLOR_BGR2RGB);  // PFM colour is RGB
+    f = rgb;
+  }
+  std::ofstream out(path, std::ios::binary | std::ios::trunc);
+  if (!out) throw InputError(path.string(), "cannot open file for writing");
+  out << (f.channels() == 1 ? "Pf" : "PF") << "\n"
+      << f.cols << " " << f.rows << "\n-1\n";  // -1: little-endian
+  const size_t row_bytes = sizeof(float) * f.cols * f.channels();
+  for (int r = f.rows - 1; r >= 0; --r) out.write(f.ptr<char>(r), static_cast<std::streamsize>(row_bytes));
+  out.close();
+  if (!out) throw InputError(path.string(), "write failed");
+}
+
+cv::Mat ReadPfm(const fs::path& path) {
+  const std::string file = path.string();
+  std::ifstream in(path, std::ios::binary);
+  if (!in) throw InputError(file, "cannot open file");
+  const std::string data((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  // Header: three whitespace-separated tokens after the magic, then one whitespace byte.
+  size_t pos = 0;
+  auto token = [&](const char* what) {
+    while (pos < data.size() && std::isspace(static_cast<unsigned char>(data[pos]))) ++pos;
+    const size_t start = pos;
+    while (pos < data.size() && !std::isspace(static_cast<unsigned char>(data[pos]))) ++pos;
+    if (start == pos || pos >= data.size()) throw InputError(file, what, "PFM header is truncated");
+    return data.substr(start, pos - start);
+  };
+  const std::string magic = token("magic");
+  int channels = 0;
+  if (magic == "Pf")
+    channels = 1;
+  else if (magic == "PF")
+    channels = 3;
+  else
+    throw InputError(file, "magic",
+                     "not a PFM file (expected 'Pf' or 'PF', got '" + magic.substr(0, 8) + "')");
+  auto integer = [&](const char* what) {
+    const std::string t = token(what);
+    char* end = nullptr;
+    const long v = std::strtol(t.c_str(), &end, 10);
+    if (*end != '\0' || v <= 0 || v > (1 << 20)) throw InputError(file, what, "invalid value '" + t + "'");
+    return static_cast<int>(v);
+  };
+  const int width = integer("width");
+  const int height = integer("height");
+  const std::string scale_text = token("scale");
+  char* end = nullptr;
+  const double scale = std::strtod(scale_text.c_str(), &end);
+  if (*end != '\0' || scale == 0 || !std::isfinite(scale))
+    throw InputError(file, "scale", "invalid value '" + scale_text + "'");
+  ++pos;  // the single whitespace byte that ends the header
+  const bool little_endian = scale < 0;
+  const std::uint64_t row_bytes = sizeof(float) * static_cast<std::uint64_t>(width) * channels;
+  const std::uint64_t need = row_bytes * static_cast<std::uint64_t>(height);
+  if (data.size() < pos || data.size() - pos < need)
+    throw InputError(file, "data",
+                     "file is truncated: " + std::to_string(width) + "x" + std::to_string(height) +
+                         " needs " + std::to_string(need) + " bytes, " +
+                         std::to_string(data.size() - std::min(pos, data.size())) + " present");
+  cv::Mat map(height, width, CV_32FC(channels));
+  const char* src = data.data() + pos;
+  for (int r = 0; r < height; ++r) {
+    // Rows are stored bottom-to-top.
+    std::memcpy(map.ptr<char>(height - 1 - r), src + r * row_bytes, row_bytes);
+  }
+  if (!little_endian) {  // big-endian data: swap every float (host is little-endian)
+    auto* bytes = reinterpret_cast<unsigned char*>(map.data);
+    for (std::uint64_t i = 0; i < need; i += 4) {
+      std::swap(bytes[i], bytes[i + 3]);
+      std::swap(bytes[i + 1], bytes[i + 2]);
+    }
+  }
+  if (channels == 3) cv::cvtColor(map, map, cv::COLOR_RGB2BGR);
+  return map;
+}
+
+// ---------------------------------------------------------------------------
+// EXR
+
+void WriteExr(const fs::path& path, const cv::Mat& map) {
+  if (map.empty()) throw InputError(path.string(), "refusing to write an empty map");
+  if (map.channels() != 1)
+    throw InputError(path.string(), "EXR depth maps hold one channel, got " + std::to_string(map.channels()));
+  EnableOpenCvExr();
+  const cv::Mat f = ToFloat32(map);
+  bool ok = false;
+  try {
+    ok = cv::imwrite(path.string(), f, {cv::IMWRITE_EXR_TYPE, cv::IMWRITE_EXR_TYPE_FLOAT});
+  } catch (const cv::Exception& e) {
+    throw InputError(path.string(), std::string("cannot write EXR: ") + e.what());
+  }
+  if (!ok) throw InputError(path.string(), "cannot write EXR");
+}
+
+cv::Mat ReadExr(const fs::path& path) {
+  std::error_code ec;
+  if (!fs::is_regular_file(path, ec)) throw InputError(path.string(), "EXR file does not exist");
+  EnableOpenCvExr();
+  cv::Mat raw;
+  try {
+    raw = cv::imread(path.string(), cv::IMREAD_UNCHANGED);
+  } catch (const cv::Exception& e) {
+    throw InputError(path.string(), std::string("cannot decode EXR: ") + e.what());
+  }
+  if (raw.empty())
+    throw InputError(path.string(), "cannot read EXR (corrupt file or OpenCV built without OpenEXR)");
+  cv::Mat first;
+  if (raw.channels() == 1)
+    first = raw;
+  else
+    cv::extractChannel(raw, first, 0);
+  return ToFloat32(first);
+}
+
+cv::Mat ReadDepthMap(const fs::path& path) {
+  const std::string ext = Lower(path.extension().string());
+  if (ext == ".pfm") return ReadPfm(path);
+  if (ext == ".exr") return ReadExr(path);
+  throw InputError(path.string(), "unsupported depth map format '" + ext + "' (expected .pfm or .exr)");
+}
+
+// ---------------------------------------------------------------------------
+// Previews
+
+cv::Mat ColorizeMap(const cv::Mat& map, double min_value, double max_value) {
+  if (map.empty()) return cv::Mat();
+  if (map.channels() != 1) throw std::invalid_argument("ColorizeMap needs a single-channel map");
+  const cv::Mat f = ToFloat32(map);
+  cv::Mat valid(f.size(), CV_8U);
+  double lo = std::numeric_limits<double>::max(), hi = std::numeric_limits<double>::lowest();
+  for (int r = 0; r < f.rows; ++r) {
+    const float* row = f.ptr<float>(r);
+    auto* v = valid.ptr<std::uint8_t>(r);
+    for (int c = 0; c < f.cols; ++c) {
+      v[c] = std::isfinite(row[c]) && row[c] != 0.0f ? 255 : 0;
+      if (v[c]) {
+        lo = std::min<double>(lo, row[c]);
+        hi = std::max<double>(hi, row[c]);
+      }
+    }
+  }
+  if (min_value < max_value) {
+    lo = min_value;
+    hi = max_value;
+  }
+  const double range = hi > lo ? hi - lo : 1.0;
+  cv::Mat scaled(f.size(), CV_8U, cv::Scalar(0));
+  for (int r = 0; r < f.rows; ++r) {
+    const float* row = f.ptr<float>(r);
+    const auto* v = valid.ptr<std::uint8_t>(r);
+    auto* out = scaled.ptr<std::uint8_t>(r);
+    for (int c = 0; c < f.cols; ++c)
+      if (v[c])
+        out[c] = static_cast<std::uint8_t>(std::clamp((row[c] - lo) / range * 255.0 + 0.5, 0.0, 255.0));
+  }
+  cv::Mat colored;
+  cv::applyColorMap(scaled, colored, cv::COLORMAP_TURBO);
+  colored.setTo(cv::Scalar::all(0), valid == 0);
+  return colored;
+}
+
+void WriteDepthPreview(const fs::path& path, const cv::Mat& map, const cv::Mat& frame, double min_value,
+                       double max_value) {
+  if (map.empty()) throw InputError(path.string(), "refusing to write a preview of an empty map");
+  cv::Mat image = ColorizeMap(map, min_value, max_value);
+  if (!frame.empty()) {
+    cv::Mat left;
+    if (frame.depth() == CV_8U)
+      left = frame;
+    else
+      frame.convertTo(left, CV_8U, 255.0);
+    if (left.channels() == 1)
+      cv::cvtColor(left, left, cv::COLOR_GRAY2BGR);
+    else if (left.channels() == 4)
+      cv::cvtColor(left, left, cv::COLOR_BGRA2BGR);
+    if (left.rows != image.rows) {
+      const int width =
+          std::max(1, static_cast<int>(std::lround(left.cols * double(image.rows) / left.rows)));
+      cv::resize(left, left, cv::Size(width, image.rows), 0, 0, cv::INTER_AREA);
+    }
+    cv::hconcat(left, image, image);
+  }
+  bool ok = false;
+  try {
+    ok = cv::imwrite(path.string(), image);
+  } catch (const cv::Exception& e) {
+    throw InputError(path.string(), std::string("cannot write preview: ") + e.what());
+  }
+  if (!ok) throw InputError(path.string(), "cannot write preview");
+}
+
+}  // namespace lfrecon
