@@ -12,6 +12,7 @@ PACKAGES=(
   libcli11-dev
   libtbb-dev
   nlohmann-json3-dev
+  libopenvdb-dev libboost-iostreams-dev libopenexr-dev
   libgtest-dev libgmock-dev libbenchmark-dev
 )
 
