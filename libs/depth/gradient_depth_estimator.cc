@@ -89,11 +89,11 @@ struct EpipolarRay {
     return u.dot(b.head<2>() * pair->a.z() - pair->a.head<2>() * b.z()) / (z * z);
   }
   Eigen::Vector2d Point(double s) const { return s * u + w * n; }
-  // j-pixel back to i through the plane fronto-parallel to i at depth d.
-  Eigen::Vector2d BackToReference(const Eigen::Vector2d& y, double d) const {
-    const Eigen::Vector3d yh(y.x(), y.y(), 1.0);
-    const Eigen::Vector3d x = pair->A_inv * yh - pair->g * (pair->r3.dot(yh) / (d + pair->r3a));
-    return x.head<2>() / x.z();
+  // Homogeneous j-pixel (or direction, z = 0) back to i through the plane
+  // fronto-parallel to i at depth d: H(d)^-1 by Sherman-Morrison, since
+  // H(d) = A + a e_z^T / d is a rank-one update of A.
+  Eigen::Vector3d BackToReferenceH(const Eigen::Vector3d& yh, double d) const {
+    return pair->A_inv * yh - pair->g * (pair->r3.dot(yh) / (d + pair->r3a));
   }
 };
 
@@ -121,11 +121,16 @@ class PixelSolver {
     const cv::Mat& img_j = ray.pair->view->image;
     Eigen::Vector3f sj[9], si[9];
     const int L = 2 * half_ + 1;
+    // The plane homography maps the segment on ℓ to a segment in I_i: map its
+    // start and direction once, then step (homogeneous coordinates).
+    const Eigen::Vector2d y0 = ray.Point(s - half_);
+    const Eigen::Vector3d base = ray.BackToReferenceH(Eigen::Vector3d(y0.x(), y0.y(), 1.0), d);
+    const Eigen::Vector3d step = ray.BackToReferenceH(Eigen::Vector3d(ray.u.x(), ray.u.y(), 0.0), d);
     for (int k = 0; k < L; ++k) {
-      const Eigen::Vector2d y = ray.Point(s + (k - half_));
+      const Eigen::Vector2d y = y0 + k * ray.u;
       if (!SampleBilinear3(img_j, y.x(), y.y(), &sj[k])) return m;
-      const Eigen::Vector2d x = ray.BackToReference(y, d);
-      if (!SampleBilinear3(ref_, x.x(), x.y(), &si[k])) return m;
+      const Eigen::Vector3d xh = base + k * step;
+      if (!(xh.z() > 0) || !SampleBilinear3(ref_, xh.x() / xh.z(), xh.y() / xh.z(), &si[k])) return m;
     }
     // Least-squares shift over the interior columns (eq. 2-3 in robust form),
     // then iteratively reweighted: at silhouettes part of the patch shows the

@@ -33,7 +33,7 @@ struct GradientDepthOptions {
   double max_view_angle_deg = 5.0;
   // Reference points (one pixel apart) sampled around the predicted match at
   // each level after the first (§3.1: "sample K reference points around").
-  int refine_reference_points = 5;
+  int refine_reference_points = 3;
   // Gauss-Newton steps of the shift at the chosen reference point.
   int shift_iterations = 3;
   // Reweighting rounds of the shift fit, and the residual scale (colour units)

@@ -11,6 +11,7 @@ namespace lfrecon {
 void DepthMetricsOptions::Check() const {
   LFRECON_CHECK_OPTION(relative_tolerance > 0);
   LFRECON_CHECK_OPTION(gradient_threshold >= 0);
+  LFRECON_CHECK_OPTION(volume_margin >= 0);
 }
 
 void DepthMetrics::Add(const DepthMetrics& other) {
@@ -24,13 +25,16 @@ DepthMetrics EvaluateDepth(const DepthMap& estimate, const cv::Mat& true_depth, 
                            const PinholeView& view, const BoundingBox& volume, const DepthMetricsOptions& options) {
   options.Check();
   DepthMetrics m;
+  BoundingBox inner = volume;
+  inner.min.array() += options.volume_margin;
+  inner.max.array() -= options.volume_margin;
   cv::Mat grad;
   if (!options.dense) grad = GradientMagnitude(image);
   for (int r = 0; r < true_depth.rows; ++r) {
     for (int c = 0; c < true_depth.cols; ++c) {
       const float t = true_depth.at<float>(r, c);
       if (!(t > 0) || !std::isfinite(t)) continue;
-      if (!volume.Contains(view.Unproject(Eigen::Vector2d(c + 0.5, r + 0.5), t))) continue;
+      if (!inner.Contains(view.Unproject(Eigen::Vector2d(c + 0.5, r + 0.5), t))) continue;
       if (!options.dense && !(grad.at<float>(r, c) > options.gradient_threshold)) continue;
       ++m.expected;
       const float e = estimate.depth.at<float>(r, c);

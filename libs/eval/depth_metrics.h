@@ -16,6 +16,10 @@ struct DepthMetricsOptions {
   double relative_tolerance = 0.005;  // BRIEF §4: within 0.5 % of true depth
   double gradient_threshold = 0.05;   // g; ignored when dense
   bool dense = false;
+  // Ground-truth foreground = true point inside V shrunk by this margin (m):
+  // surfaces lying exactly on V's faces (the figurines table top is V's
+  // bottom face, z = 0) are not foreground.
+  double volume_margin = 0.001;
   void Check() const;
 };
 
