@@ -80,13 +80,19 @@ StreamingDepthStats StreamingDepth::Run(FrameSource& frames, const std::vector<i
 
   std::map<int, ViewImage> held;
   std::map<int, DepthMap> sparse;
+  std::map<int, cv::Mat> wanted_frames;  // frames of wanted views until they are emitted
   Progress progress("depth", static_cast<long long>(wanted.size()));
   Frame frame;
   for (int f = 0; f <= last_frame; ++f) {
     if (!frames.Next(&frame)) throw InputError("frames", "stream ended after " + std::to_string(f) + " of " +
                                                              std::to_string(n) + " frames");
     ++stats.frames_read;
+    if (frame.image.cols != views_[f].width || frame.image.rows != views_[f].height)
+      throw InputError(frame.name, "frame is " + std::to_string(frame.image.cols) + "x" +
+                                       std::to_string(frame.image.rows) + ", its camera " +
+                                       std::to_string(views_[f].width) + "x" + std::to_string(views_[f].height));
     if (frame_last_use[f] >= f) held[f] = ViewImage{views_[f], frame.image};
+    if (is_wanted[f]) wanted_frames[f] = frame.image;
     stats.max_frames_held = std::max(stats.max_frames_held, static_cast<int>(held.size()));
 
     for (int s : sparse_at[f]) {
@@ -121,7 +127,8 @@ StreamingDepthStats StreamingDepth::Run(FrameSource& frames, const std::vector<i
         stats.seconds_filter += timer.Seconds();
         ++stats.filtered_maps;
       }
-      sink(i, sparse.at(i), filtered);
+      sink(i, wanted_frames.at(i), sparse.at(i), filtered);
+      wanted_frames.erase(i);
       progress.Advance();
     }
     // Release what no pending view needs any more.

@@ -34,8 +34,8 @@ struct StreamingDepthStats {
 
 class StreamingDepth {
  public:
-  // view_index, sparse map, filtered map (empty if run_filter is false).
-  using Sink = std::function<void(int, const DepthMap&, const DepthMap&)>;
+  // view_index, its frame (CV_32FC3), sparse map, filtered map (empty if run_filter is false).
+  using Sink = std::function<void(int, const cv::Mat&, const DepthMap&, const DepthMap&)>;
 
   StreamingDepth(std::vector<PinholeView> views, const BoundingBox& volume, const StreamingDepthOptions& options);
 

@@ -1,6 +1,7 @@
 #include "io/depth_map_io.h"
 
 #include <algorithm>
+#include <vector>
 #include <cctype>
 #include <cmath>
 #include <cstdlib>
@@ -183,17 +184,24 @@ cv::Mat ColorizeMap(const cv::Mat& map, double min_value, double max_value) {
   if (map.channels() != 1) throw std::invalid_argument("ColorizeMap needs a single-channel map");
   const cv::Mat f = ToFloat32(map);
   cv::Mat valid(f.size(), CV_8U);
-  double lo = std::numeric_limits<double>::max(), hi = std::numeric_limits<double>::lowest();
+  std::vector<float> values;
   for (int r = 0; r < f.rows; ++r) {
     const float* row = f.ptr<float>(r);
     auto* v = valid.ptr<std::uint8_t>(r);
     for (int c = 0; c < f.cols; ++c) {
       v[c] = std::isfinite(row[c]) && row[c] != 0.0f ? 255 : 0;
-      if (v[c]) {
-        lo = std::min<double>(lo, row[c]);
-        hi = std::max<double>(hi, row[c]);
-      }
+      if (v[c]) values.push_back(row[c]);
     }
+  }
+  // Auto range from the 2nd to 98th percentile: a few far outliers (a wall
+  // behind the scene) would otherwise squash the object into one colour.
+  double lo = 0, hi = 1;
+  if (!values.empty()) {
+    const size_t a = values.size() / 50, b = values.size() - 1 - values.size() / 50;
+    std::nth_element(values.begin(), values.begin() + a, values.end());
+    lo = values[a];
+    std::nth_element(values.begin(), values.begin() + b, values.end());
+    hi = values[b];
   }
   if (min_value < max_value) {
     lo = min_value;

@@ -24,7 +24,7 @@ cv::Mat ReadExr(const std::filesystem::path& path);
 // Reads .pfm or .exr by extension.
 cv::Mat ReadDepthMap(const std::filesystem::path& path);
 
-// Colour-maps `map` (turbo) between `min_value` and `max_value` (auto from the
+// Colour-maps `map` (turbo) between `min_value` and `max_value` (auto: 2nd-98th percentile of the
 // valid values when min >= max); invalid (0 or non-finite) pixels are black.
 // If `frame` is given (CV_32FC3 in [0,1] or 8-bit), it is placed on the left
 // and the map on the right.

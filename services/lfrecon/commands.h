@@ -8,5 +8,6 @@ namespace lfrecon::cli {
 
 void AddInfoCommand(CLI::App& root, int* exit_code);
 void AddSynthCommand(CLI::App& root, int* exit_code);
+void AddDepthCommand(CLI::App& root, int* exit_code);
 
 }  // namespace lfrecon::cli

@@ -15,6 +15,7 @@ int main(int argc, char** argv) {
   CLI::App app{"lfrecon: meshes with thin features from dense light fields (Depth from Gradients, 3DV 2016)"};
   app.set_version_flag("--version", std::string("lfrecon ") + LFRECON_VERSION);
   app.require_subcommand(1);
+  app.fallthrough();  // -v/-q also after the subcommand
   int verbosity = 0;
   app.add_flag("-v,--verbose", verbosity, "More logging (-v debug, -vv trace)");
   bool quiet = false;
@@ -24,6 +25,7 @@ int main(int argc, char** argv) {
   int exit_code = 0;
   lfrecon::cli::AddInfoCommand(app, &exit_code);
   lfrecon::cli::AddSynthCommand(app, &exit_code);
+  lfrecon::cli::AddDepthCommand(app, &exit_code);
 
   try {
     app.parse(argc, argv);

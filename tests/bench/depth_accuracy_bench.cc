@@ -58,12 +58,9 @@ int main(int argc, char** argv) {
   StreamingDepth stage(views, ds.bbox(), sopt);
   DepthMetrics sparse_total, filtered_total;
   cv::Mat last_image;
-  // The evaluation needs the reference frame for ‖∇I‖: read it again (cheap).
-  auto frames_eval = ds.OpenFrames();
   Timer timer;
-  const StreamingDepthStats stats = stage.Run(*frames, wanted, [&](int i, const DepthMap& sp, const DepthMap& fi) {
+  const StreamingDepthStats stats = stage.Run(*frames, wanted, [&](int i, const cv::Mat& image, const DepthMap& sp, const DepthMap& fi) {
     const cv::Mat gt = ReadDepthMap(*ds.GroundTruthDepthPath(i));
-    const cv::Mat image = frames_eval->Read(i).image;
     const DepthMetrics ms = EvaluateDepth(sp, gt, image, views[i], ds.bbox(), DepthMetricsOptions());
     sparse_total.Add(ms);
     std::printf("view %4d: sparse accuracy %.3f coverage %.3f", i, ms.Accuracy(), ms.Coverage());
