@@ -8,6 +8,7 @@
 #include <algorithm>
 #include <atomic>
 #include <cmath>
+#include <deque>
 #include <opencv2/imgproc.hpp>
 
 #include "depth/image_sampling.h"
@@ -17,7 +18,8 @@ namespace lfrecon {
 
 void GradientDepthOptions::Check() const {
   LFRECON_CHECK_OPTION(gradient_threshold >= 0);
-  LFRECON_CHECK_OPTION(patch_length >= 3 && patch_length % 2 == 1);
+  LFRECON_CHECK_OPTION(patch_length >= 3 && patch_length <= 9 && patch_length % 2 == 1);
+  LFRECON_CHECK_OPTION(patch_rows >= 1 && patch_rows <= 5 && patch_rows % 2 == 1);
   LFRECON_CHECK_OPTION(sigma_c > 0);
   LFRECON_CHECK_OPTION(max_view_angle_deg > 0 && max_view_angle_deg < 90);
   LFRECON_CHECK_OPTION(refine_reference_points >= 1);
@@ -26,6 +28,14 @@ void GradientDepthOptions::Check() const {
   LFRECON_CHECK_OPTION(min_depth >= 0);
   LFRECON_CHECK_OPTION(max_depth <= 0 || max_depth > min_depth);
   LFRECON_CHECK_OPTION(max_reference_points >= 2);
+  LFRECON_CHECK_OPTION(presmooth_sigma >= 0 && presmooth_sigma <= 5);
+}
+
+cv::Mat SmoothForDepth(const cv::Mat& image_bgr, const GradientDepthOptions& options) {
+  if (options.presmooth_sigma <= 0) return image_bgr;
+  cv::Mat out;
+  cv::GaussianBlur(image_bgr, out, cv::Size(0, 0), options.presmooth_sigma);
+  return out;
 }
 
 cv::Mat GradientMagnitude(const cv::Mat& image_bgr) {
@@ -43,6 +53,7 @@ namespace {
 // Geometry of one (reference i, neighbour j) pair that does not depend on the pixel.
 struct PairGeometry {
   const ViewImage* view = nullptr;
+  const cv::Mat* image = nullptr;  // the neighbour's (smoothed) image that patches sample
   Eigen::Matrix3d A;      // K_j R_ji K_i^-1: homogeneous j-pixel of p at depth d is d·A·p̃ + a
   Eigen::Vector3d a;      // K_j t_ji
   Eigen::Matrix3d A_inv;  // for H(d)^-1 by Sherman-Morrison
@@ -110,53 +121,41 @@ class PixelSolver {
   PixelSolver(const GradientDepthOptions& o, const cv::Mat& ref_image, const Eigen::Vector2d& p,
               const Eigen::Vector3f& ref_colour)
       : o_(o), ref_(ref_image), p_(p), ref_colour_(ref_colour), half_(o.patch_length / 2),
-        inv_two_sigma_c2_(1.0 / (2.0 * o.sigma_c * o.sigma_c)),
-        inv_irls_scale2_(1.0 / (o.irls_scale * o.irls_scale)) {}
+        inv_two_sigma_c2_(1.0 / (2.0 * o.sigma_c * o.sigma_c)) {}
 
   // The 2×5 patch at line coordinate s (reference depth D(s)) and its least-squares shift.
   ShiftMeasurement Measure(const EpipolarRay& ray, double s) const {
     ShiftMeasurement m;
     const double d = ray.Depth(s);
     if (!(d > 0) || !ray.InFront(d)) return m;
-    const cv::Mat& img_j = ray.pair->view->image;
-    Eigen::Vector3f sj[9], si[9];
+    const cv::Mat& img_j = *ray.pair->image;
     const int L = 2 * half_ + 1;
-    // The plane homography maps the segment on ℓ to a segment in I_i: map its
-    // start and direction once, then step (homogeneous coordinates).
-    const Eigen::Vector2d y0 = ray.Point(s - half_);
-    const Eigen::Vector3d base = ray.BackToReferenceH(Eigen::Vector3d(y0.x(), y0.y(), 1.0), d);
+    // The plane homography maps each segment on (or beside) ℓ to a segment in
+    // I_i: map its start and direction once, then step (homogeneous coordinates).
     const Eigen::Vector3d step = ray.BackToReferenceH(Eigen::Vector3d(ray.u.x(), ray.u.y(), 0.0), d);
-    for (int k = 0; k < L; ++k) {
-      const Eigen::Vector2d y = y0 + k * ray.u;
-      if (!SampleBilinear3(img_j, y.x(), y.y(), &sj[k])) return m;
-      const Eigen::Vector3d xh = base + k * step;
-      if (!(xh.z() > 0) || !SampleBilinear3(ref_, xh.x() / xh.z(), xh.y() / xh.z(), &si[k])) return m;
-    }
-    // Least-squares shift over the interior columns (eq. 2-3 in robust form),
-    // then iteratively reweighted: at silhouettes part of the patch shows the
-    // background moving at another speed, and those columns fit badly.
-    Eigen::Vector3f gx[9], gy[9];
-    for (int k = 1; k + 1 < L; ++k) {
-      gx[k] = 0.25f * (si[k + 1] - si[k - 1] + sj[k + 1] - sj[k - 1]);
-      gy[k] = sj[k] - si[k];
-    }
-    double w[9];
-    for (int k = 1; k + 1 < L; ++k) w[k] = 1.0;
-    double sxx = 0, shift = 0;
-    for (int irls = 0; irls < 1 + o_.irls_iterations; ++irls) {
-      double sxy = 0;
-      sxx = 0;
-      for (int k = 1; k + 1 < L; ++k) {
-        sxy += w[k] * gx[k].dot(gy[k]);
-        sxx += w[k] * gx[k].squaredNorm();
+    double sxy = 0, sxx = 0;
+    Eigen::Vector3f sj[9], si[9];
+    const int half_rows = o_.patch_rows / 2;
+    for (int row = -half_rows; row <= half_rows; ++row) {
+      const Eigen::Vector2d y0 = ray.Point(s - half_) + row * ray.n;
+      const Eigen::Vector3d base = ray.BackToReferenceH(Eigen::Vector3d(y0.x(), y0.y(), 1.0), d);
+      for (int k = 0; k < L; ++k) {
+        const Eigen::Vector2d y = y0 + k * ray.u;
+        if (!SampleBilinear3(img_j, y.x(), y.y(), &sj[k])) return m;
+        const Eigen::Vector3d xh = base + k * step;
+        if (!(xh.z() > 0) || !SampleBilinear3(ref_, xh.x() / xh.z(), xh.y() / xh.z(), &si[k])) return m;
       }
-      if (!(sxx > 1e-12)) return m;
-      shift = -sxy / sxx;
+      // Least-squares shift over the interior columns: eq. 2-3 in robust form,
+      // gx the patch gradient along ℓ, gy the difference between its rows.
       for (int k = 1; k + 1 < L; ++k) {
-        const double e2 = (gy[k] + static_cast<float>(shift) * gx[k]).squaredNorm();
-        w[k] = 1.0 / (1.0 + e2 * inv_irls_scale2_);
+        const Eigen::Vector3f gx = 0.25f * (si[k + 1] - si[k - 1] + sj[k + 1] - sj[k - 1]);
+        const Eigen::Vector3f gy = sj[k] - si[k];
+        sxy += gx.dot(gy);
+        sxx += gx.squaredNorm();
       }
     }
+    if (!(sxx > 1e-12)) return m;
+    const double shift = -sxy / sxx;
     m.shift = shift;
     m.energy = sxx;
     m.valid = std::isfinite(m.shift);
@@ -204,7 +203,7 @@ class PixelSolver {
     if (!ray.InFront(d)) return 0;
     const Eigen::Vector2d y = ray.Pixel(d);
     Eigen::Vector3f c;
-    if (!SampleBilinear3(ray.pair->view->image, y.x(), y.y(), &c)) return 0;
+    if (!SampleBilinear3(*ray.pair->image, y.x(), y.y(), &c)) return 0;
     return std::exp(-(c - ref_colour_).squaredNorm() * inv_two_sigma_c2_);
   }
 
@@ -215,7 +214,6 @@ class PixelSolver {
   Eigen::Vector3f ref_colour_;
   int half_;
   double inv_two_sigma_c2_;
-  double inv_irls_scale2_;
 };
 
 }  // namespace
@@ -234,15 +232,29 @@ DepthMap GradientDepthEstimator::Estimate(const ViewImage& reference, const std:
     return out;
   }
 
+  // Patches are sampled from pre-smoothed images (see presmooth_sigma);
+  // views that come without them are smoothed here.
+  std::deque<cv::Mat> local_smoothed;  // deque: references stay valid
+  auto smoothed = [&](const ViewImage& v) -> const cv::Mat& {
+    if (!v.smoothed.empty() || o.presmooth_sigma <= 0) return v.smoothed.empty() ? v.image : v.smoothed;
+    local_smoothed.push_back(SmoothForDepth(v.image, o));
+    return local_smoothed.back();
+  };
+  const cv::Mat& ref_smoothed = smoothed(reference);
+  std::vector<const cv::Mat*> nb_smoothed;
+  for (const ViewImage* nb : neighbors)
+    nb_smoothed.push_back(nb && !nb->image.empty() && nb->image.type() == CV_32FC3 ? &smoothed(*nb) : nullptr);
   // Pair geometry for the neighbours within the angle, sorted by angle.
   std::vector<PairGeometry> pairs;
-  for (const ViewImage* nb : neighbors) {
-    if (!nb || nb->image.empty() || nb->image.type() != CV_32FC3) continue;
+  for (size_t q = 0; q < neighbors.size(); ++q) {
+    const ViewImage* nb = neighbors[q];
+    if (!nb_smoothed[q]) continue;
     const double c = std::clamp(vi.ViewingDirection().dot(nb->view.ViewingDirection()), -1.0, 1.0);
     const double angle = std::acos(c) * 180.0 / M_PI;
     if (angle > o.max_view_angle_deg) continue;
     PairGeometry pg;
     pg.view = nb;
+    pg.image = nb_smoothed[q];
     Eigen::Matrix3d R;
     Eigen::Vector3d t;
     RelativePose(vi, nb->view, &R, &t);
@@ -313,8 +325,9 @@ DepthMap GradientDepthEstimator::Estimate(const ViewImage& reference, const std:
         ++num_edge;
         const Eigen::Vector2d p(c + 0.5, r + 0.5);
         const Eigen::Vector3d ph(p.x(), p.y(), 1.0);
-        const Eigen::Vector3f colour(irow[3 * c], irow[3 * c + 1], irow[3 * c + 2]);
-        PixelSolver solver(o, reference.image, p, colour);
+        const float* srow = ref_smoothed.ptr<float>(r);
+        const Eigen::Vector3f colour(srow[3 * c], srow[3 * c + 1], srow[3 * c + 2]);
+        PixelSolver solver(o, ref_smoothed, p, colour);
         for (size_t k = 0; k < pairs.size(); ++k) ray_ok[k] = rays[k].Init(pairs[k], ph);
 
         // Level 1: scan the whole depth range in the first-level views; a

@@ -17,7 +17,7 @@ struct Result {
   std::string output;  // stdout and stderr together
 };
 
-Result Run(const std::string& args) {
+Result RunCli(const std::string& args) {
   const std::string cmd = std::string(LFRECON_CLI) + " " + args + " 2>&1";
   Result r;
   FILE* pipe = popen(cmd.c_str(), "r");
@@ -38,29 +38,29 @@ fs::path TempDir(const std::string& name) {
 }
 
 TEST(LfreconCli, VersionAndHelp) {
-  Result r = Run("--version");
+  Result r = RunCli("--version");
   EXPECT_EQ(r.code, 0);
   EXPECT_NE(r.output.find("lfrecon"), std::string::npos);
-  r = Run("--help");
+  r = RunCli("--help");
   EXPECT_EQ(r.code, 0);
   EXPECT_NE(r.output.find("info"), std::string::npos);
   EXPECT_NE(r.output.find("synth"), std::string::npos);
   for (const char* sub : {"info", "synth"}) {
-    r = Run(std::string(sub) + " --help");
+    r = RunCli(std::string(sub) + " --help");
     EXPECT_EQ(r.code, 0) << sub;
   }
 }
 
 TEST(LfreconCli, UsageErrorsExitTwo) {
-  EXPECT_EQ(Run("").code, 2);
-  EXPECT_EQ(Run("no-such-command").code, 2);
-  EXPECT_EQ(Run("info --no-such-flag").code, 2);
-  EXPECT_EQ(Run("info --bbox 1 2 3").code, 2);
-  EXPECT_EQ(Run("info --dataset /tmp --bbox 0 0 0 -1 1 1").code, 2);
+  EXPECT_EQ(RunCli("").code, 2);
+  EXPECT_EQ(RunCli("no-such-command").code, 2);
+  EXPECT_EQ(RunCli("info --no-such-flag").code, 2);
+  EXPECT_EQ(RunCli("info --bbox 1 2 3").code, 2);
+  EXPECT_EQ(RunCli("info --dataset /tmp --bbox 0 0 0 -1 1 1").code, 2);
 }
 
 TEST(LfreconCli, MissingDatasetExitsOneNamingIt) {
-  const Result r = Run("info --dataset /nonexistent/lfrecon_dataset_xyz");
+  const Result r = RunCli("info --dataset /nonexistent/lfrecon_dataset_xyz");
   EXPECT_EQ(r.code, 1);
   EXPECT_NE(r.output.find("/nonexistent/lfrecon_dataset_xyz"), std::string::npos) << r.output;
 }
@@ -72,7 +72,7 @@ TEST(LfreconCli, NanQuaternionExitsOneNamingTheFile) {
   std::ofstream(dir / "sparse" / "cameras.txt") << "1 PINHOLE 64 48 50 50 32 24\n";
   std::ofstream(dir / "sparse" / "images.txt") << "1 nan 0 0 0 0 0 0 1 a.png\n\n";
   std::ofstream(dir / "sparse" / "points3D.txt") << "";
-  const Result r = Run("info --dataset " + dir.string());
+  const Result r = RunCli("info --dataset " + dir.string());
   EXPECT_EQ(r.code, 1) << r.output;
   EXPECT_NE(r.output.find("images.txt"), std::string::npos) << r.output;
   fs::remove_all(dir);
@@ -80,9 +80,9 @@ TEST(LfreconCli, NanQuaternionExitsOneNamingTheFile) {
 
 TEST(LfreconCli, SynthThenInfo) {
   const fs::path dir = TempDir("synth");
-  Result r = Run("-q synth --out " + (dir / "ds").string() + " --frames 24 --width 160 --height 90");
+  Result r = RunCli("-q synth --out " + (dir / "ds").string() + " --frames 24 --width 160 --height 90");
   ASSERT_EQ(r.code, 0) << r.output;
-  r = Run("info --json --dataset " + (dir / "ds").string());
+  r = RunCli("info --json --dataset " + (dir / "ds").string());
   ASSERT_EQ(r.code, 0) << r.output;
   EXPECT_NE(r.output.find("\"views\": 24"), std::string::npos) << r.output;
   EXPECT_NE(r.output.find("scene.json"), std::string::npos) << r.output;
@@ -91,7 +91,7 @@ TEST(LfreconCli, SynthThenInfo) {
 
 TEST(LfreconCli, SynthUnknownSceneIsUsageError) {
   const fs::path dir = TempDir("badscene");
-  const Result r = Run("synth --out " + dir.string() + " --scene no_such_scene");
+  const Result r = RunCli("synth --out " + dir.string() + " --scene no_such_scene");
   EXPECT_EQ(r.code, 2) << r.output;
   EXPECT_NE(r.output.find("no_such_scene"), std::string::npos) << r.output;
   fs::remove_all(dir);
