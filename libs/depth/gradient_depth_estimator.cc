@@ -319,7 +319,6 @@ DepthMap GradientDepthEstimator::Estimate(const ViewImage& reference, const std:
     std::vector<char> ray_ok(pairs.size());
     for (int r = range.begin(); r != range.end(); ++r) {
       const float* grow = grad.ptr<float>(r);
-      const float* irow = reference.image.ptr<float>(r);
       for (int c = 0; c < cols; ++c) {
         if (!(grow[c] > o.gradient_threshold)) continue;
         ++num_edge;
