@@ -29,13 +29,15 @@ void GradientDepthOptions::Check() const {
   LFRECON_CHECK_OPTION(max_depth <= 0 || max_depth > min_depth);
   LFRECON_CHECK_OPTION(max_reference_points >= 2);
   LFRECON_CHECK_OPTION(presmooth_sigma >= 0 && presmooth_sigma <= 5);
+  LFRECON_CHECK_OPTION(level_angle_ratio >= 1.0);
 }
 
-cv::Mat SmoothForDepth(const cv::Mat& image_bgr, const GradientDepthOptions& options) {
-  if (options.presmooth_sigma <= 0) return image_bgr;
-  cv::Mat out;
-  cv::GaussianBlur(image_bgr, out, cv::Size(0, 0), options.presmooth_sigma);
-  return out;
+void PrepareViewImage(ViewImage* view, const GradientDepthOptions& options) {
+  if (options.presmooth_sigma > 0)
+    cv::GaussianBlur(view->image, view->smoothed, cv::Size(0, 0), options.presmooth_sigma);
+  else
+    view->smoothed = view->image;
+  cv::cvtColor(view->smoothed, view->grey, cv::COLOR_BGR2GRAY);
 }
 
 cv::Mat GradientMagnitude(const cv::Mat& image_bgr) {
@@ -53,7 +55,8 @@ namespace {
 // Geometry of one (reference i, neighbour j) pair that does not depend on the pixel.
 struct PairGeometry {
   const ViewImage* view = nullptr;
-  const cv::Mat* image = nullptr;  // the neighbour's (smoothed) image that patches sample
+  const cv::Mat* image = nullptr;  // the neighbour's smoothed colour image (for C^c)
+  const cv::Mat* grey = nullptr;   // and its smoothed grey image (for the patches)
   Eigen::Matrix3d A;      // K_j R_ji K_i^-1: homogeneous j-pixel of p at depth d is d·A·p̃ + a
   Eigen::Vector3d a;      // K_j t_ji
   Eigen::Matrix3d A_inv;  // for H(d)^-1 by Sherman-Morrison
@@ -118,40 +121,42 @@ struct ShiftMeasurement {
 
 class PixelSolver {
  public:
-  PixelSolver(const GradientDepthOptions& o, const cv::Mat& ref_image, const Eigen::Vector2d& p,
+  PixelSolver(const GradientDepthOptions& o, const cv::Mat& ref_grey, const Eigen::Vector2d& p,
               const Eigen::Vector3f& ref_colour)
-      : o_(o), ref_(ref_image), p_(p), ref_colour_(ref_colour), half_(o.patch_length / 2),
+      : o_(o), ref_grey_(ref_grey), p_(p), ref_colour_(ref_colour), half_(o.patch_length / 2),
         inv_two_sigma_c2_(1.0 / (2.0 * o.sigma_c * o.sigma_c)) {}
 
   // The 2×5 patch at line coordinate s (reference depth D(s)) and its least-squares shift.
-  ShiftMeasurement Measure(const EpipolarRay& ray, double s) const {
+  ShiftMeasurement Measure(const EpipolarRay& ray, double s, int rows) const {
     ShiftMeasurement m;
     const double d = ray.Depth(s);
     if (!(d > 0) || !ray.InFront(d)) return m;
     const cv::Mat& img_j = *ray.pair->image;
+    const cv::Mat& grey_j = *ray.pair->grey;
     const int L = 2 * half_ + 1;
     // The plane homography maps each segment on (or beside) ℓ to a segment in
     // I_i: map its start and direction once, then step (homogeneous coordinates).
     const Eigen::Vector3d step = ray.BackToReferenceH(Eigen::Vector3d(ray.u.x(), ray.u.y(), 0.0), d);
     double sxy = 0, sxx = 0;
-    Eigen::Vector3f sj[9], si[9];
-    const int half_rows = o_.patch_rows / 2;
+    float sj[9], si[9];
+    const int half_rows = rows / 2;
     for (int row = -half_rows; row <= half_rows; ++row) {
       const Eigen::Vector2d y0 = ray.Point(s - half_) + row * ray.n;
       const Eigen::Vector3d base = ray.BackToReferenceH(Eigen::Vector3d(y0.x(), y0.y(), 1.0), d);
       for (int k = 0; k < L; ++k) {
         const Eigen::Vector2d y = y0 + k * ray.u;
-        if (!SampleBilinear3(img_j, y.x(), y.y(), &sj[k])) return m;
+        if (!SampleBilinear1(grey_j, y.x(), y.y(), &sj[k])) return m;
         const Eigen::Vector3d xh = base + k * step;
-        if (!(xh.z() > 0) || !SampleBilinear3(ref_, xh.x() / xh.z(), xh.y() / xh.z(), &si[k])) return m;
+        if (!(xh.z() > 0) || !SampleBilinear1(ref_grey_, xh.x() / xh.z(), xh.y() / xh.z(), &si[k])) return m;
       }
       // Least-squares shift over the interior columns: eq. 2-3 in robust form,
       // gx the patch gradient along ℓ, gy the difference between its rows.
+      // Grey levels: colour gave the same accuracy at three times the cost.
       for (int k = 1; k + 1 < L; ++k) {
-        const Eigen::Vector3f gx = 0.25f * (si[k + 1] - si[k - 1] + sj[k + 1] - sj[k - 1]);
-        const Eigen::Vector3f gy = sj[k] - si[k];
-        sxy += gx.dot(gy);
-        sxx += gx.squaredNorm();
+        const float gx = 0.25f * (si[k + 1] - si[k - 1] + sj[k + 1] - sj[k - 1]);
+        const float gy = sj[k] - si[k];
+        sxy += gx * gy;
+        sxx += gx * gx;
       }
     }
     if (!(sxx > 1e-12)) return m;
@@ -175,9 +180,10 @@ class PixelSolver {
   double Search(const EpipolarRay& ray, double s0, int count, ShiftMeasurement* best_out) const {
     double best_c = -1, best_s = std::numeric_limits<double>::quiet_NaN();
     ShiftMeasurement best;
+    // Choosing the reference point needs only the 2×5 patch on ℓ itself.
     for (int k = 0; k < count; ++k) {
       const double s = s0 + k;
-      const ShiftMeasurement m = Measure(ray, s);
+      const ShiftMeasurement m = Measure(ray, s, 1);
       if (!m.valid || std::abs(m.shift) > 2.0) continue;
       const double c = m.colour * std::exp(-m.shift * m.shift);  // C^c · C^d (eq. 4, 5)
       if (c > best_c) {
@@ -187,16 +193,19 @@ class PixelSolver {
       }
     }
     if (best_c < 0) return std::numeric_limits<double>::quiet_NaN();
+    // Gauss-Newton on the shift, with the full patch_rows-row patch.
     double s = best_s + best.shift;
-    for (int it = 0; it < o_.shift_iterations && std::abs(best.shift) > 0.005; ++it) {
-      const ShiftMeasurement m = Measure(ray, s);
+    for (int it = 0; it < o_.shift_iterations; ++it) {
+      const ShiftMeasurement m = Measure(ray, s, o_.patch_rows);
       if (!m.valid || std::abs(m.shift) > 1.0) break;
       best = m;
       s += m.shift;
+      if (std::abs(m.shift) < 0.01) break;
     }
     *best_out = best;
     return s;
   }
+
 
   // C^c of the pixel's colour against neighbour j at depth d.
   double ColourAt(const EpipolarRay& ray, double d) const {
@@ -209,7 +218,7 @@ class PixelSolver {
 
  private:
   const GradientDepthOptions& o_;
-  const cv::Mat& ref_;
+  const cv::Mat& ref_grey_;
   Eigen::Vector2d p_;
   Eigen::Vector3f ref_colour_;
   int half_;
@@ -233,28 +242,30 @@ DepthMap GradientDepthEstimator::Estimate(const ViewImage& reference, const std:
   }
 
   // Patches are sampled from pre-smoothed images (see presmooth_sigma);
-  // views that come without them are smoothed here.
-  std::deque<cv::Mat> local_smoothed;  // deque: references stay valid
-  auto smoothed = [&](const ViewImage& v) -> const cv::Mat& {
-    if (!v.smoothed.empty() || o.presmooth_sigma <= 0) return v.smoothed.empty() ? v.image : v.smoothed;
-    local_smoothed.push_back(SmoothForDepth(v.image, o));
-    return local_smoothed.back();
+  // views that come without them are prepared here.
+  std::deque<ViewImage> local;  // deque: pointers stay valid
+  auto prepared = [&](const ViewImage& v) -> const ViewImage* {
+    if (!v.smoothed.empty() && !v.grey.empty()) return &v;
+    local.push_back(v);
+    PrepareViewImage(&local.back(), o);
+    return &local.back();
   };
-  const cv::Mat& ref_smoothed = smoothed(reference);
-  std::vector<const cv::Mat*> nb_smoothed;
+  const ViewImage* ref_prepared = prepared(reference);
+  std::vector<const ViewImage*> nb_prepared;
   for (const ViewImage* nb : neighbors)
-    nb_smoothed.push_back(nb && !nb->image.empty() && nb->image.type() == CV_32FC3 ? &smoothed(*nb) : nullptr);
+    nb_prepared.push_back(nb && !nb->image.empty() && nb->image.type() == CV_32FC3 ? prepared(*nb) : nullptr);
   // Pair geometry for the neighbours within the angle, sorted by angle.
   std::vector<PairGeometry> pairs;
   for (size_t q = 0; q < neighbors.size(); ++q) {
-    const ViewImage* nb = neighbors[q];
-    if (!nb_smoothed[q]) continue;
+    const ViewImage* nb = nb_prepared[q];
+    if (!nb) continue;
     const double c = std::clamp(vi.ViewingDirection().dot(nb->view.ViewingDirection()), -1.0, 1.0);
     const double angle = std::acos(c) * 180.0 / M_PI;
     if (angle > o.max_view_angle_deg) continue;
     PairGeometry pg;
     pg.view = nb;
-    pg.image = nb_smoothed[q];
+    pg.image = &nb->smoothed;
+    pg.grey = &nb->grey;
     Eigen::Matrix3d R;
     Eigen::Vector3d t;
     RelativePose(vi, nb->view, &R, &t);
@@ -283,11 +294,24 @@ DepthMap GradientDepthEstimator::Estimate(const ViewImage& reference, const std:
       break;
     }
   }
+  // Later levels, nearest first. On each side a view is used when its angle
+  // is at least level_angle_ratio times the last used one (the farthest view
+  // always is): far views carry nearly all the depth information, and one
+  // step of the ratio keeps the prediction within the ±1 px search.
   std::vector<int> order = first_level;
   if (o.use_hierarchy) {
-    for (size_t k = 0; k < pairs.size(); ++k)
-      if (std::find(first_level.begin(), first_level.end(), static_cast<int>(k)) == first_level.end())
+    double last_angle[2] = {0, 0};
+    for (int f : first_level) last_angle[pairs[f].baseline.dot(pairs[0].baseline) < 0] = pairs[f].angle_deg;
+    int farthest[2] = {-1, -1};
+    for (size_t k = 0; k < pairs.size(); ++k) farthest[pairs[k].baseline.dot(pairs[0].baseline) < 0] = k;
+    for (size_t k = 0; k < pairs.size(); ++k) {
+      if (std::find(first_level.begin(), first_level.end(), static_cast<int>(k)) != first_level.end()) continue;
+      const int side = pairs[k].baseline.dot(pairs[0].baseline) < 0;
+      if (pairs[k].angle_deg >= o.level_angle_ratio * last_angle[side] || static_cast<int>(k) == farthest[side]) {
         order.push_back(static_cast<int>(k));
+        last_angle[side] = pairs[k].angle_deg;
+      }
+    }
   }
 
   // Search range from V.
@@ -309,6 +333,7 @@ DepthMap GradientDepthEstimator::Estimate(const ViewImage& reference, const std:
     d_far = 20.0 * zmax;
   }
   d_near = std::max(d_near, 1e-6);
+  spdlog::debug("depth: search range [{:.3f}, {:.3f}] m, {} neighbours", d_near, d_far, pairs.size());
 
   const cv::Mat grad = GradientMagnitude(reference.image);
   const int rows = reference.image.rows, cols = reference.image.cols;
@@ -324,9 +349,9 @@ DepthMap GradientDepthEstimator::Estimate(const ViewImage& reference, const std:
         ++num_edge;
         const Eigen::Vector2d p(c + 0.5, r + 0.5);
         const Eigen::Vector3d ph(p.x(), p.y(), 1.0);
-        const float* srow = ref_smoothed.ptr<float>(r);
+        const float* srow = ref_prepared->smoothed.ptr<float>(r);
         const Eigen::Vector3f colour(srow[3 * c], srow[3 * c + 1], srow[3 * c + 2]);
-        PixelSolver solver(o, ref_smoothed, p, colour);
+        PixelSolver solver(o, ref_prepared->grey, p, colour);
         for (size_t k = 0; k < pairs.size(); ++k) ray_ok[k] = rays[k].Init(pairs[k], ph);
 
         // Level 1: scan the whole depth range in the first-level views; a
@@ -339,7 +364,7 @@ DepthMap GradientDepthEstimator::Estimate(const ViewImage& reference, const std:
           const double s_far = ray.InFront(d_far) ? ray.S(d_far) : s_near + o.max_reference_points;
           const int count = std::min(o.max_reference_points, static_cast<int>(std::ceil(s_far - s_near)) + 1);
           for (int k = 0; k < count; ++k) {
-            const ShiftMeasurement m = solver.Measure(ray, s_near + k);
+            const ShiftMeasurement m = solver.Measure(ray, s_near + k, 1);
             if (!m.valid || std::abs(m.shift) > 2.0) continue;
             const double d = ray.Depth(s_near + k + m.shift);
             if (!(d > 0)) continue;

@@ -57,6 +57,9 @@ struct GradientDepthOptions {
   // Use every view within max_view_angle_deg (true) or only the nearest view
   // on each side (false; the paper's first level alone).
   bool use_hierarchy = true;
+  // Levels after the first use, on each side, only views at least this many
+  // times the angle of the previous level's view (1: every view within 5°).
+  double level_angle_ratio = 1.0;
   // σ (pixels) of a Gaussian applied to the images the patches sample (ours,
   // not the paper's): it removes the sub-pixel bias of bilinear sampling on
   // texture near the pixel scale, which otherwise dominates the error at 0.5 %
@@ -72,9 +75,10 @@ struct GradientDepthOptions {
 struct ViewImage {
   PinholeView view;
   cv::Mat image;
-  // SmoothForDepth(image): filled once per frame by callers that reuse a view
+  // Filled by PrepareViewImage: once per frame by callers that reuse a view
   // for many references; computed on the fly when empty.
-  cv::Mat smoothed;
+  cv::Mat smoothed;  // CV_32FC3, image smoothed by presmooth_sigma
+  cv::Mat grey;      // CV_32F, grey levels of `smoothed`
 };
 
 class GradientDepthEstimator {
@@ -94,9 +98,9 @@ class GradientDepthEstimator {
   GradientDepthOptions options_;
 };
 
-// The image the patches are sampled from: Gaussian pre-smoothing with
-// options.presmooth_sigma (the image itself when 0).
-cv::Mat SmoothForDepth(const cv::Mat& image_bgr, const GradientDepthOptions& options);
+// Fills view->smoothed and view->grey from view->image: Gaussian
+// pre-smoothing with options.presmooth_sigma (none when 0), then grey levels.
+void PrepareViewImage(ViewImage* view, const GradientDepthOptions& options);
 
 // Grey-level gradient magnitude ‖∇I‖ per pixel (CV_32F), as the estimator thresholds it.
 cv::Mat GradientMagnitude(const cv::Mat& image_bgr);

@@ -91,8 +91,12 @@ StreamingDepthStats StreamingDepth::Run(FrameSource& frames, const std::vector<i
       throw InputError(frame.name, "frame is " + std::to_string(frame.image.cols) + "x" +
                                        std::to_string(frame.image.rows) + ", its camera " +
                                        std::to_string(views_[f].width) + "x" + std::to_string(views_[f].height));
-    if (frame_last_use[f] >= f)
-      held[f] = ViewImage{views_[f], frame.image, SmoothForDepth(frame.image, options_.gradient)};
+    if (frame_last_use[f] >= f) {
+      ViewImage& v = held[f];
+      v.view = views_[f];
+      v.image = frame.image;
+      PrepareViewImage(&v, options_.gradient);
+    }
     if (is_wanted[f]) wanted_frames[f] = frame.image;
     stats.max_frames_held = std::max(stats.max_frames_held, static_cast<int>(held.size()));
 

@@ -94,7 +94,7 @@ TEST(GradientDepthEstimator, DegenerateInputGivesEmptyMapsNotNaN) {
   EXPECT_EQ(m.CountValid(), 0);
   EXPECT_EQ(m.depth.size(), v.ref.image.size());
   // Neighbours beyond 5°: a view of the same sequence 90° away.
-  ViewImage far{v.sequence->View(120), v.sequence->RenderImage(120), cv::Mat()};
+  ViewImage far{v.sequence->View(120), v.sequence->RenderImage(120), cv::Mat(), cv::Mat()};
   m = est.Estimate(v.ref, {&far}, v.volume);
   EXPECT_EQ(m.CountValid(), 0);
   // A blank frame (no gradient anywhere).

@@ -50,8 +50,8 @@ inline SynthViews MakeSynthViews(const std::string& scene, int reference = 0, do
   const ViewGraph graph(dirs, angle);
   v.neighbor_ids = graph.Neighbors(reference);
   v.truth = v.sequence->Render(reference);
-  v.ref = ViewImage{v.sequence->View(reference), v.truth.image, cv::Mat()};
-  for (int j : v.neighbor_ids) v.neighbors.push_back(ViewImage{v.sequence->View(j), v.sequence->RenderImage(j), cv::Mat()});
+  v.ref = ViewImage{v.sequence->View(reference), v.truth.image, cv::Mat(), cv::Mat()};
+  for (int j : v.neighbor_ids) v.neighbors.push_back(ViewImage{v.sequence->View(j), v.sequence->RenderImage(j), cv::Mat(), cv::Mat()});
   v.foreground = synth::ForegroundMask(v.sequence->scene(), v.truth.labels);
   cv::dilate(v.truth.mixed, v.near_edge, cv::Mat::ones(5, 5, CV_8U));
   return v;
