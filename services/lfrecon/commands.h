@@ -8,6 +8,7 @@ namespace lfrecon::cli {
 
 void AddInfoCommand(CLI::App& root, int* exit_code);
 void AddSynthCommand(CLI::App& root, int* exit_code);
+void AddEvalCommand(CLI::App& root, int* exit_code);
 void AddDepthCommand(CLI::App& root, int* exit_code);
 
 }  // namespace lfrecon::cli

@@ -25,6 +25,7 @@ int main(int argc, char** argv) {
   int exit_code = 0;
   lfrecon::cli::AddInfoCommand(app, &exit_code);
   lfrecon::cli::AddSynthCommand(app, &exit_code);
+  lfrecon::cli::AddEvalCommand(app, &exit_code);
   lfrecon::cli::AddDepthCommand(app, &exit_code);
 
   try {

@@ -1,0 +1,389 @@
+#include "fusion/probabilistic_fusion.h"
+
+#include <openvdb/io/File.h>
+#include <openvdb/openvdb.h>
+#include <openvdb/tree/ValueAccessor.h>
+#include <spdlog/spdlog.h>
+#include <tbb/blocked_range.h>
+#include <tbb/enumerable_thread_specific.h>
+#include <tbb/parallel_for.h>
+
+#include <algorithm>
+#include <cmath>
+#include <mutex>
+#include <stdexcept>
+#include <string>
+#include <unordered_map>
+#include <unordered_set>
+#include <utility>
+#include <vector>
+
+#include "fusion/marching_cubes_table.h"
+#include "fusion/surface_evidence.h"
+#include "util/error.h"
+#include "util/progress.h"
+
+namespace lfrecon {
+namespace {
+
+using EvidenceTree = openvdb::Vec2STree;  // (Σ log P_i, number of views) per voxel
+using EvidenceLeaf = EvidenceTree::LeafNodeType;
+using MaskLeaf = openvdb::MaskTree::LeafNodeType;
+using openvdb::Coord;
+using openvdb::Vec2s;
+
+void InitOpenVdb() {
+  static std::once_flag once;
+  std::call_once(once, [] { openvdb::initialize(); });
+}
+
+Coord CornerOffset(int k) { return Coord(k & 1, (k >> 1) & 1, (k >> 2) & 1); }
+
+// 21 + 21 + 20 bits of voxel index (all >= 0, < 2^20) and 2 bits of axis.
+std::uint64_t EdgeKey(const Coord& c, int axis) {
+  return (static_cast<std::uint64_t>(c.x()) << 43) | (static_cast<std::uint64_t>(c.y()) << 22) |
+         (static_cast<std::uint64_t>(c.z()) << 2) | static_cast<std::uint64_t>(axis);
+}
+
+}  // namespace
+
+void MeshingOptions::Check() const {
+  LFRECON_CHECK_OPTION(threshold < 0 || (threshold > 0 && threshold < 1));
+  LFRECON_CHECK_OPTION(min_views >= 1);
+}
+
+struct ProbabilisticFusion::Impl {
+  FusionOptions options;
+  EvidenceTree tree{Vec2s(0.0f, 0.0f)};
+  std::vector<std::unique_ptr<CompactDepthView>> views;
+  std::unordered_set<int> view_ids;
+  Eigen::Vector3i dims;
+  FusionStats stats;
+
+  Eigen::Vector3d Center(const Coord& c) const {
+    return options.volume.min + options.voxel_size * (Eigen::Vector3d(c.x(), c.y(), c.z()).array() + 0.5).matrix();
+  }
+
+  openvdb::MaskTree Activate(const CompactDepthView& cv) const;
+  void BackFill(const openvdb::MaskTree& fresh, std::size_t num_previous);
+  void Apply(const SurfaceEvidence& evidence);
+  bool LeafOutsideView(const Coord& origin, const PinholeView& view) const;
+};
+
+openvdb::MaskTree ProbabilisticFusion::Impl::Activate(const CompactDepthView& cv) const {
+  const PinholeView& view = cv.view();
+  const double s = options.voxel_size;
+  const double band = options.BandHalfWidth();
+  const double step = 0.5 * s;                         // along the ray
+  const double lateral = options.activation_step * s;  // between sub-pixel rays
+  const double f = std::min(view.K(0, 0), view.K(1, 1));
+  const Eigen::Matrix3d ray_from_pixel = view.R.transpose() * view.K_inv;  // world offset per unit planar depth
+  const Eigen::Vector3d center = view.Center();
+  const Eigen::Vector3d vmin = options.volume.min;
+  const int nx = dims.x(), ny = dims.y(), nz = dims.z();
+
+  tbb::enumerable_thread_specific<openvdb::MaskTree> locals;
+  tbb::parallel_for(tbb::blocked_range<int>(0, view.height), [&](const tbb::blocked_range<int>& rows) {
+    openvdb::MaskTree& local = locals.local();
+    openvdb::tree::ValueAccessor<openvdb::MaskTree> acc(local);
+    for (int r = rows.begin(); r < rows.end(); ++r) {
+      for (int c = 0; c < view.width; ++c) {
+        const CompactDepthView::Pixel& p = cv.at(r, c);
+        if (p.depth == 0 || CompactDepthView::Label(p) != DepthLabel::kForeground) continue;
+        const double d = cv.Depth(p);
+        // Sub-pixel rays so that neighbouring rays are at most `lateral` apart at depth d.
+        const int k = std::clamp(static_cast<int>(std::ceil(d / f / lateral)), 1, 16);
+        const double z0 = std::max(d - band, 1e-6), z1 = d + band;
+        for (int b = 0; b < k; ++b) {
+          for (int a = 0; a < k; ++a) {
+            const Eigen::Vector3d w = ray_from_pixel * Eigen::Vector3d(c + (a + 0.5) / k, r + (b + 0.5) / k, 1.0);
+            const int n = std::max(1, static_cast<int>(std::ceil((z1 - z0) * w.norm() / step)));
+            Coord last(-1, -1, -1);
+            for (int m = 0; m <= n; ++m) {
+              const double z = z0 + (z1 - z0) * m / n;
+              const Eigen::Vector3d g = (center + z * w - vmin) / s;
+              const Coord ijk(static_cast<int>(std::floor(g.x())), static_cast<int>(std::floor(g.y())),
+                              static_cast<int>(std::floor(g.z())));
+              if (ijk == last) continue;
+              last = ijk;
+              if (ijk.x() < 0 || ijk.y() < 0 || ijk.z() < 0 || ijk.x() >= nx || ijk.y() >= ny || ijk.z() >= nz) continue;
+              acc.setValueOn(ijk);
+            }
+          }
+        }
+      }
+    }
+  });
+  openvdb::MaskTree out;
+  for (openvdb::MaskTree& t : locals) out.topologyUnion(t);
+  return out;
+}
+
+void ProbabilisticFusion::Impl::BackFill(const openvdb::MaskTree& fresh, std::size_t num_previous) {
+  std::vector<const MaskLeaf*> mask_leaves;
+  fresh.getNodes(mask_leaves);
+  std::vector<SurfaceEvidence> evidence;
+  evidence.reserve(num_previous);
+  for (std::size_t i = 0; i < num_previous; ++i) evidence.emplace_back(*views[i], options);
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, mask_leaves.size()), [&](const auto& range) {
+    for (std::size_t li = range.begin(); li < range.end(); ++li) {
+      const MaskLeaf& mask = *mask_leaves[li];
+      EvidenceLeaf* leaf = tree.probeLeaf(mask.origin());
+      if (!leaf) continue;  // cannot happen: fresh was merged into the tree
+      for (auto it = mask.cbeginValueOn(); it; ++it) {
+        const Eigen::Vector3d x = Center(it.getCoord());
+        Vec2s v = leaf->getValue(it.pos());
+        for (const SurfaceEvidence& ev : evidence) {
+          float lp;
+          if (ev.LogProbability(x, &lp)) {
+            v[0] += lp;
+            v[1] += 1.0f;
+          }
+        }
+        leaf->setValueOnly(it.pos(), v);
+      }
+    }
+  });
+}
+
+bool ProbabilisticFusion::Impl::LeafOutsideView(const Coord& origin, const PinholeView& view) const {
+  const int dim = static_cast<int>(EvidenceLeaf::DIM) - 1;
+  bool all_behind = true, left = true, right = true, top = true, bottom = true;
+  for (int k = 0; k < 8; ++k) {
+    const Coord c = origin + Coord((k & 1) * dim, ((k >> 1) & 1) * dim, ((k >> 2) & 1) * dim);
+    const Eigen::Vector3d x = view.R * Center(c) + view.t;
+    if (x.z() <= 1e-9) return false;  // straddles the camera plane: keep it (rare)
+    all_behind = false;
+    const Eigen::Vector3d h = view.K * x;
+    const double u = h.x() / h.z(), v = h.y() / h.z();
+    left &= u < -1;
+    right &= u > view.width + 1;
+    top &= v < -1;
+    bottom &= v > view.height + 1;
+  }
+  return all_behind || left || right || top || bottom;
+}
+
+void ProbabilisticFusion::Impl::Apply(const SurfaceEvidence& evidence) {
+  std::vector<EvidenceLeaf*> leaves;
+  tree.getNodes(leaves);
+  const PinholeView& view = evidence.view().view();
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, leaves.size()), [&](const auto& range) {
+    for (std::size_t li = range.begin(); li < range.end(); ++li) {
+      EvidenceLeaf& leaf = *leaves[li];
+      if (LeafOutsideView(leaf.origin(), view)) continue;
+      for (auto it = leaf.beginValueOn(); it; ++it) {
+        float lp;
+        if (evidence.LogProbability(Center(it.getCoord()), &lp)) {
+          const Vec2s v = *it;
+          it.setValue(Vec2s(v[0] + lp, v[1] + 1.0f));
+        }
+      }
+    }
+  });
+}
+
+ProbabilisticFusion::ProbabilisticFusion(const FusionOptions& options) : impl_(std::make_unique<Impl>()) {
+  options.Check();
+  InitOpenVdb();
+  impl_->options = options;
+  impl_->dims = options.GridSize();
+}
+
+ProbabilisticFusion::~ProbabilisticFusion() = default;
+ProbabilisticFusion::ProbabilisticFusion(ProbabilisticFusion&&) noexcept = default;
+ProbabilisticFusion& ProbabilisticFusion::operator=(ProbabilisticFusion&&) noexcept = default;
+
+const FusionOptions& ProbabilisticFusion::options() const { return impl_->options; }
+int ProbabilisticFusion::NumViews() const { return static_cast<int>(impl_->views.size()); }
+
+bool ProbabilisticFusion::HasView(int view_id) const { return impl_->view_ids.count(view_id) > 0; }
+
+bool ProbabilisticFusion::Integrate(const PinholeView& view, const DepthMap& depth, int view_id) {
+  if (view_id >= 0 && HasView(view_id)) {
+    spdlog::warn("fusion: view {} was already integrated; ignored", view_id);
+    return false;
+  }
+  if (depth.depth.empty() || depth.depth.rows != view.height || depth.depth.cols != view.width)
+    throw std::invalid_argument("fusion: depth map is " + std::to_string(depth.depth.cols) + "x" +
+                                std::to_string(depth.depth.rows) + ", its view " + std::to_string(view.width) + "x" +
+                                std::to_string(view.height));
+  Impl& m = *impl_;
+  auto compact = std::make_unique<CompactDepthView>(view, depth, m.options.volume);
+
+  Timer timer;
+  openvdb::MaskTree fresh = m.Activate(*compact);
+  fresh.topologyDifference(m.tree);
+  m.tree.topologyUnion(fresh);
+  const std::size_t num_fresh = fresh.activeVoxelCount();
+  m.stats.activate_s += timer.Seconds();
+
+  timer.Restart();
+  if (num_fresh > 0 && !m.views.empty()) m.BackFill(fresh, m.views.size());
+  m.stats.backfill_s += timer.Seconds();
+
+  timer.Restart();
+  m.Apply(SurfaceEvidence(*compact, m.options));
+  m.stats.update_s += timer.Seconds();
+
+  m.stats.store_bytes += compact->MemoryBytes();
+  m.views.push_back(std::move(compact));
+  m.stats.views = static_cast<int>(m.views.size());
+  if (view_id >= 0) m.view_ids.insert(view_id);
+  spdlog::debug("fusion: view {} integrated: {} new voxels, {} active", m.views.size(), num_fresh,
+                m.tree.activeVoxelCount());
+  return true;
+}
+
+FusionStats ProbabilisticFusion::Stats() const {
+  FusionStats s = impl_->stats;
+  s.active_voxels = impl_->tree.activeVoxelCount();
+  s.grid_bytes = impl_->tree.memUsage();
+  return s;
+}
+
+Eigen::Vector3d ProbabilisticFusion::VoxelCenter(const Eigen::Vector3i& ijk) const {
+  return impl_->Center(Coord(ijk.x(), ijk.y(), ijk.z()));
+}
+
+Eigen::Vector3i ProbabilisticFusion::VoxelIndex(const Eigen::Vector3d& world) const {
+  const Eigen::Vector3d g = (world - impl_->options.volume.min) / impl_->options.voxel_size;
+  return g.array().floor().cast<int>();
+}
+
+double ProbabilisticFusion::SurfaceProbability(const Eigen::Vector3i& ijk, int* num_views) const {
+  Vec2s v;
+  const bool on = impl_->tree.probeValue(Coord(ijk.x(), ijk.y(), ijk.z()), v);
+  const int n = on ? static_cast<int>(v[1]) : 0;
+  if (num_views) *num_views = n;
+  return n > 0 ? std::exp(static_cast<double>(v[0]) / n) : 0.0;
+}
+
+bool ProbabilisticFusion::IsActive(const Eigen::Vector3i& ijk) const {
+  return impl_->tree.isValueOn(Coord(ijk.x(), ijk.y(), ijk.z()));
+}
+
+void ProbabilisticFusion::ForEachVoxel(
+    const std::function<void(const Eigen::Vector3i& ijk, double sum_log_p, int num_views)>& f) const {
+  for (auto it = impl_->tree.cbeginValueOn(); it; ++it) {
+    if (!it.isVoxelValue()) continue;
+    const Coord c = it.getCoord();
+    const Vec2s v = *it;
+    f(Eigen::Vector3i(c.x(), c.y(), c.z()), v[0], static_cast<int>(v[1]));
+  }
+}
+
+TriangleMesh ProbabilisticFusion::ExtractMesh(const MeshingOptions& mo) const {
+  mo.Check();
+  const Impl& m = *impl_;
+  const float iso = static_cast<float>(mo.threshold < 0 ? m.options.surface_threshold : mo.threshold);
+  const float min_views = static_cast<float>(mo.min_views);
+  const double s = m.options.voxel_size;
+  const auto& edges = mc::Edges();
+
+  std::vector<const EvidenceLeaf*> leaves;
+  m.tree.getNodes(leaves);
+  struct LeafMesh {
+    std::vector<std::pair<std::uint64_t, Eigen::Vector3f>> vertices;
+    std::vector<std::array<std::uint64_t, 3>> triangles;
+  };
+  std::vector<LeafMesh> parts(leaves.size());
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, leaves.size()), [&](const auto& range) {
+    openvdb::tree::ValueAccessor<const EvidenceTree> acc(m.tree);
+    for (std::size_t li = range.begin(); li < range.end(); ++li) {
+      LeafMesh& out = parts[li];
+      for (auto it = leaves[li]->cbeginValueOn(); it; ++it) {
+        const Coord ijk = it.getCoord();
+        float h[8];
+        int mask = 0;
+        bool complete = true;
+        for (int k = 0; k < 8 && complete; ++k) {
+          Vec2s v;
+          if (!acc.probeValue(ijk + CornerOffset(k), v) || v[1] < min_views) {
+            complete = false;
+            break;
+          }
+          h[k] = std::exp(v[0] / v[1]);
+          if (h[k] >= iso) mask |= 1 << k;
+        }
+        if (!complete || mask == 0 || mask == 255) continue;
+        std::array<std::uint64_t, 12> keys{};
+        std::array<bool, 12> done{};
+        for (const auto& tri : mc::Triangles(mask)) {
+          std::array<std::uint64_t, 3> t;
+          for (int q = 0; q < 3; ++q) {
+            const int e = tri[q];
+            if (!done[e]) {
+              const mc::Edge& edge = edges[e];
+              const Coord c0 = ijk + CornerOffset(edge.corner0);
+              const float h0 = h[edge.corner0], h1 = h[edge.corner1];
+              const double frac = std::clamp(static_cast<double>((iso - h0) / (h1 - h0)), 0.0, 1.0);
+              Eigen::Vector3d p = m.Center(c0);
+              p[edge.axis] += frac * s;
+              keys[e] = EdgeKey(c0, edge.axis);
+              out.vertices.emplace_back(keys[e], p.cast<float>());
+              done[e] = true;
+            }
+            t[q] = keys[e];
+          }
+          out.triangles.push_back(t);
+        }
+      }
+    }
+  });
+
+  TriangleMesh mesh;
+  std::unordered_map<std::uint64_t, int> index;
+  std::size_t num_tris = 0;
+  for (const LeafMesh& p : parts) num_tris += p.triangles.size();
+  index.reserve(num_tris);
+  mesh.triangles.reserve(num_tris);
+  for (const LeafMesh& p : parts) {
+    for (const auto& [key, pos] : p.vertices) {
+      if (index.emplace(key, static_cast<int>(mesh.vertices.size())).second) mesh.vertices.push_back(pos);
+    }
+    for (const auto& t : p.triangles) mesh.triangles.emplace_back(index.at(t[0]), index.at(t[1]), index.at(t[2]));
+  }
+  mesh.ComputeVertexNormals();
+  return mesh;
+}
+
+void ProbabilisticFusion::WriteVdb(const std::filesystem::path& path) const {
+  const Impl& m = *impl_;
+  const double s = m.options.voxel_size;
+  openvdb::math::Transform::Ptr xf = openvdb::math::Transform::createLinearTransform(s);
+  const Eigen::Vector3d o = m.options.volume.min + Eigen::Vector3d::Constant(0.5 * s);
+  xf->postTranslate(openvdb::Vec3d(o.x(), o.y(), o.z()));
+  auto make = [&](const std::string& name) {
+    openvdb::FloatGrid::Ptr g = openvdb::FloatGrid::create(0.0f);
+    g->setName(name);
+    g->setTransform(xf->copy());
+    g->setGridClass(openvdb::GRID_FOG_VOLUME);
+    return g;
+  };
+  openvdb::FloatGrid::Ptr h = make("surface_probability"), sum = make("log_p_sum"), count = make("view_count");
+  {
+    auto ha = h->getAccessor(), sa = sum->getAccessor(), ca = count->getAccessor();
+    for (auto it = m.tree.cbeginValueOn(); it; ++it) {
+      if (!it.isVoxelValue()) continue;
+      const Coord c = it.getCoord();
+      const Vec2s v = *it;
+      ha.setValue(c, v[1] > 0 ? std::exp(v[0] / v[1]) : 0.0f);
+      sa.setValue(c, v[0]);
+      ca.setValue(c, v[1]);
+    }
+  }
+  h->insertMeta("surface_threshold", openvdb::FloatMetadata(static_cast<float>(m.options.surface_threshold)));
+  h->insertMeta("views", openvdb::Int32Metadata(static_cast<int>(m.views.size())));
+  h->insertMeta("sigma_v_voxels", openvdb::FloatMetadata(static_cast<float>(m.options.sigma_v)));
+  h->insertMeta("sigma_s", openvdb::FloatMetadata(static_cast<float>(m.options.sigma_s)));
+  try {
+    openvdb::io::File file(path.string());
+    file.write({h, sum, count});
+    file.close();
+  } catch (const openvdb::Exception& e) {
+    throw std::runtime_error("cannot write " + path.string() + ": " + e.what());
+  }
+}
+
+}  // namespace lfrecon

@@ -1,0 +1,92 @@
+#pragma once
+// Probabilistic depth aggregation (BRIEF §1.5, paper §5) on a sparse OpenVDB
+// grid, streaming: views arrive one by one, in any order, and H can be read at
+// any moment.
+//
+// Per voxel v the grid stores Σ_i log P_i(v ∈ S | c_{v,i}) and the number of
+// views i that said something about v, so H(v) = exp(mean log P_i) (eq. 14).
+// Only *active* voxels are stored: those that lie in some view's foreground
+// band (|d_{v,i} - d_i| <= band·σ_v around a foreground depth). Memory grows
+// with the observed surface, not with V's volume.
+//
+// Integrating view j:
+//  (a) activates the voxels of its foreground band (ray marching over its
+//      foreground pixels);
+//  (b) back-fills the voxels it activated for the first time with the evidence
+//      of every view integrated before (kept as CompactDepthViews);
+//  (c) adds its own evidence to every active voxel in its frustum (band,
+//      free space in front of foreground depths, background rays).
+// Every active voxel thus ends with the evidence of every view, whatever the
+// order: H is order independent (up to float rounding of the sums).
+//
+// Not thread-safe: one Integrate at a time (each call is parallel inside).
+#include <Eigen/Core>
+#include <cstddef>
+#include <filesystem>
+#include <functional>
+#include <memory>
+
+#include "depth/depth_map.h"
+#include "fusion/fusion_options.h"
+#include "geometry/pinhole_view.h"
+#include "geometry/triangle_mesh.h"
+
+namespace lfrecon {
+
+struct MeshingOptions {
+  double threshold = -1;  // H iso-value; < 0: FusionOptions::surface_threshold (0.2)
+  int min_views = 1;      // cells with a corner seen by fewer views are skipped
+  void Check() const;
+};
+
+struct FusionStats {
+  int views = 0;
+  std::size_t active_voxels = 0;
+  std::size_t grid_bytes = 0;   // the OpenVDB tree
+  std::size_t store_bytes = 0;  // the compact depth maps kept for back-fill
+  double activate_s = 0, backfill_s = 0, update_s = 0;  // cumulative seconds per phase
+};
+
+class ProbabilisticFusion {
+ public:
+  explicit ProbabilisticFusion(const FusionOptions& options);  // throws OptionError
+  ~ProbabilisticFusion();
+  ProbabilisticFusion(ProbabilisticFusion&&) noexcept;
+  ProbabilisticFusion& operator=(ProbabilisticFusion&&) noexcept;
+
+  // Adds one view. `depth`: planar depth (CV_32F, 0 = none) of the view's size;
+  // confidence (CV_32F in [0, 1]) and label (CV_8U DepthLabel) are optional:
+  // without confidence c_i = 1, without labels a depth is foreground when its
+  // point lies inside V. `view_id` >= 0 makes it idempotent (a re-issued view
+  // is ignored and false returned). Throws std::invalid_argument on a size mismatch.
+  bool Integrate(const PinholeView& view, const DepthMap& depth, int view_id = -1);
+  bool HasView(int view_id) const;
+
+  const FusionOptions& options() const;
+  int NumViews() const;
+  FusionStats Stats() const;
+
+  // Voxel (i, j, k) has its centre at V.min + (i + ½, j + ½, k + ½) · voxel_size.
+  Eigen::Vector3d VoxelCenter(const Eigen::Vector3i& ijk) const;
+  Eigen::Vector3i VoxelIndex(const Eigen::Vector3d& world) const;
+  // H(v) = exp(Σ log P / n) of an active voxel; 0 where nothing is stored.
+  double SurfaceProbability(const Eigen::Vector3i& ijk, int* num_views = nullptr) const;
+  bool IsActive(const Eigen::Vector3i& ijk) const;
+  // Visits every active voxel (serially, in the tree's deterministic order).
+  void ForEachVoxel(const std::function<void(const Eigen::Vector3i& ijk, double sum_log_p, int num_views)>& f) const;
+
+  // The H = threshold iso-surface by marching cubes over cells whose 8 corners
+  // are active (so the unobserved inside of a surface's band never makes a
+  // second wall). World coordinates, outward normals (towards lower H), no colours.
+  TriangleMesh ExtractMesh(const MeshingOptions& options = {}) const;
+
+  // Writes an OpenVDB file with float grids "surface_probability" (H),
+  // "log_p_sum" and "view_count", in world coordinates (voxel centres).
+  void WriteVdb(const std::filesystem::path& path) const;
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace lfrecon

@@ -1,0 +1,91 @@
+#pragma once
+// One view's evidence about voxels (BRIEF §1.5, eqs. 11-13), from a compact
+// copy of its depth map. The fusion keeps one CompactDepthView per integrated
+// view so that voxels activated later can be back-filled with exactly the
+// evidence they would have received had they been active from the start
+// (order independence). Direct updates and back-fill both go through
+// SurfaceEvidence on the same quantised data, so they agree bit for bit.
+#include <Eigen/Core>
+#include <cstddef>
+#include <cstdint>
+#include <vector>
+
+#include "depth/depth_map.h"
+#include "fusion/fusion_options.h"
+#include "geometry/pinhole_view.h"
+#include "geometry/triangle_mesh.h"
+
+namespace lfrecon {
+
+// A depth map quantised to 4 bytes per pixel: planar depth as 16 bits over the
+// view's depth range of V (resolution (far - near) / 65533, ~14 µm for a 0.9 m
+// range), confidence as 8 bits, the label as 8 bits.
+//  - foreground (label kForeground, or, when the map has no labels, depth > 0
+//    with its point inside V): the depth, clamped to [near, far];
+//  - background with a depth beyond V, or with depth 0 (nothing hit / sky): the
+//    whole ray through V is free;
+//  - background nearer than V's nearest point: it occludes all of V — kept as "none";
+//  - no depth (0) without a background label, or confidence <= 0: none.
+class CompactDepthView {
+ public:
+  struct Pixel {
+    std::uint16_t depth = 0;  // 0 none, kBeyond: background behind V, else 1 + quantised depth
+    std::uint8_t confidence = 0;
+    std::uint8_t label = 0;  // DepthLabel
+  };
+  static constexpr std::uint16_t kBeyond = 65535;
+
+  CompactDepthView() = default;
+  CompactDepthView(const PinholeView& view, const DepthMap& depth, const BoundingBox& volume);
+
+  const PinholeView& view() const { return view_; }
+  int width() const { return view_.width; }
+  int height() const { return view_.height; }
+  double near_depth() const { return near_; }
+  double far_depth() const { return far_; }
+  const Pixel& at(int row, int col) const { return pixels_[static_cast<std::size_t>(row) * view_.width + col]; }
+  // Decoded depth (metres; +infinity for kBeyond, 0 for none) and confidence in [0, 1].
+  double Depth(const Pixel& p) const;
+  static double Confidence(const Pixel& p) { return p.confidence / 255.0; }
+  static DepthLabel Label(const Pixel& p) { return static_cast<DepthLabel>(p.label); }
+
+  int CountForeground() const;
+  std::size_t MemoryBytes() const { return pixels_.size() * sizeof(Pixel) + sizeof(*this); }
+
+ private:
+  PinholeView view_;
+  double near_ = 0, far_ = 0, step_ = 0;
+  std::vector<Pixel> pixels_;
+};
+
+// Precomputed per view: the projection rows and option constants.
+class SurfaceEvidence {
+ public:
+  SurfaceEvidence(const CompactDepthView& view, const FusionOptions& options);
+
+  // log P_i(v ∈ S | c_{v,i}) for the world point x (a voxel centre). Returns
+  // false when view i says nothing about x: x is behind the camera or outside
+  // the image, its pixel has no depth, or x is occluded (more than the band
+  // behind a foreground depth, or behind a background surface). Optionally
+  // returns c_{v,i}.
+  bool LogProbability(const Eigen::Vector3d& x, float* log_p, double* c = nullptr) const;
+
+  // Eqs. 12-13 for a confidence c, clamped to [ε, 1-ε].
+  static double Probability(double c, double sigma_s, double clamp);
+
+  const CompactDepthView& view() const { return *view_; }
+
+ private:
+  bool Sample(double u, double v, DepthLabel* label, double* depth, double* confidence) const;
+
+  const CompactDepthView* view_;
+  Eigen::Matrix3d P_;  // K R
+  Eigen::Vector3d p_;  // K t
+  double sigma_v_, band_, margin_;
+  bool carve_front_;
+  double two_over_s2_;
+  double log_clamp_lo_, log_clamp_hi_;
+  bool bilinear_;
+};
+
+}  // namespace lfrecon

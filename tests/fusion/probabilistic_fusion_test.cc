@@ -1,0 +1,293 @@
+// Fusion of exact synthetic depth maps: accuracy of the H = 0.2 surface,
+// order independence, free-space carving, thin features.
+#include "fusion/probabilistic_fusion.h"
+
+#include <gtest/gtest.h>
+#include <spdlog/spdlog.h>
+
+#include <Eigen/Geometry>
+#include <algorithm>
+#include <filesystem>
+#include <map>
+#include <random>
+
+#include "eval/mesh_metrics.h"
+#include "fusion/surface_evidence.h"
+#include "fusion_test_rig.h"
+#include "synth/gt_mesh.h"
+#include "util/error.h"
+#include "util/progress.h"
+
+namespace lfrecon {
+namespace {
+
+using testing::Box;
+using testing::ExactDepth;
+
+struct Rendered {
+  std::vector<PinholeView> views;
+  std::vector<DepthMap> depths;
+};
+
+Rendered RenderAll(const synth::Scene& scene, const std::vector<PinholeView>& views) {
+  Rendered r;
+  r.views = views;
+  for (const PinholeView& v : views) r.depths.push_back(ExactDepth(scene, v));
+  return r;
+}
+
+ProbabilisticFusion Fuse(const FusionOptions& options, const Rendered& data, const std::vector<int>& order = {}) {
+  ProbabilisticFusion fusion(options);
+  for (std::size_t k = 0; k < data.views.size(); ++k) {
+    const std::size_t i = order.empty() ? k : static_cast<std::size_t>(order[k]);
+    fusion.Integrate(data.views[i], data.depths[i]);
+  }
+  return fusion;
+}
+
+MeshMetrics Score(const TriangleMesh& mesh, const TriangleMesh& gt, const TriangleMesh* thin, double tau,
+                  const BoundingBox& volume) {
+  MeshMetricsOptions mo;
+  mo.thresholds = {tau};
+  mo.sample_spacing = tau / 4;
+  mo.volume = volume;
+  return EvaluateMesh(mesh, gt, thin, mo);
+}
+
+// Every directed edge once and its reverse once: closed and consistently oriented.
+int CountBadEdges(const TriangleMesh& mesh) {
+  std::map<std::pair<int, int>, int> directed;
+  for (const Eigen::Vector3i& t : mesh.triangles)
+    for (int k = 0; k < 3; ++k) directed[{t[k], t[(k + 1) % 3]}]++;
+  int bad = 0;
+  for (const auto& [e, n] : directed) {
+    const auto rev = directed.find({e.second, e.first});
+    if (n != 1 || rev == directed.end() || rev->second != 1) ++bad;
+  }
+  return bad;
+}
+
+synth::Scene SphereScene() {
+  synth::Scene s("sphere");
+  s.set_foreground_bbox(Box(Eigen::Vector3d::Constant(-0.14), Eigen::Vector3d::Constant(0.14)));
+  s.Add(synth::Primitive::Sphere(Eigen::Vector3d::Zero(), 0.1, synth::Material::Flat({0.9f, 0.3f, 0.1f}))
+            .Named("sphere")
+            .Foreground());
+  testing::AddDome(&s);
+  return s;
+}
+
+synth::Scene BoxScene() {
+  synth::Scene s("box");
+  s.set_foreground_bbox(Box(Eigen::Vector3d::Constant(-0.14), Eigen::Vector3d::Constant(0.14)));
+  const Eigen::Matrix3d R = (Eigen::AngleAxisd(0.4, Eigen::Vector3d::UnitZ()) *
+                             Eigen::AngleAxisd(0.2, Eigen::Vector3d::UnitX()))
+                                .toRotationMatrix();
+  s.Add(synth::Primitive::Box({0.01, -0.005, 0.0}, {0.08, 0.05, 0.06}, synth::Material::Flat({0.2f, 0.5f, 0.9f}), R)
+            .Named("box")
+            .Foreground());
+  testing::AddDome(&s);
+  return s;
+}
+
+FusionOptions OptionsFor(const synth::Scene& scene, double voxel) {
+  FusionOptions o;
+  o.volume = scene.foreground_bbox();
+  o.voxel_size = voxel;
+  return o;
+}
+
+class FusionAccuracy : public ::testing::TestWithParam<const char*> {};
+
+TEST_P(FusionAccuracy, ExactDepthGivesF1AboveNinetyFivePercentAtOneVoxel) {
+  const std::string name = GetParam();
+  const synth::Scene scene = name == "sphere" ? SphereScene() : BoxScene();
+  const double voxel = 0.004;
+  const Rendered data = RenderAll(scene, testing::SphereRig(40, Eigen::Vector3d::Zero(), 0.6, 160, 90, 40));
+  Timer timer;
+  const ProbabilisticFusion fusion = Fuse(OptionsFor(scene, voxel), data);
+  const double fuse_s = timer.Seconds();
+  const TriangleMesh mesh = fusion.ExtractMesh();
+  const MeshMetrics m = Score(mesh, synth::GroundTruthMesh(scene), nullptr, voxel, scene.foreground_bbox());
+  const MeshMetrics half = Score(mesh, synth::GroundTruthMesh(scene), nullptr, voxel / 2, scene.foreground_bbox());
+  const FusionStats st = fusion.Stats();
+  std::printf("%s: %zu active voxels (%.1f%% of V), %zu triangles, fused in %.2f s; F %.4f at %.0f mm, %.4f at %.0f mm\n",
+              name.c_str(), st.active_voxels, 100.0 * st.active_voxels / OptionsFor(scene, voxel).GridSize().prod(),
+              mesh.triangles.size(), fuse_s, m.scores[0].fscore, voxel * 1000, half.scores[0].fscore, voxel * 500);
+  EXPECT_GE(m.scores[0].fscore, 0.95);
+  // Exact depth puts the surface well within half a voxel (0.99 measured with the defaults).
+  EXPECT_GE(half.scores[0].fscore, 0.95);
+  EXPECT_EQ(CountBadEdges(mesh), 0) << "the mesh of a closed object must be closed and consistently oriented";
+  // Normals point outward: away from the object's centre.
+  double mean_dot = 0;
+  for (std::size_t i = 0; i < mesh.vertices.size(); ++i)
+    mean_dot += mesh.normals[i].dot(mesh.vertices[i].normalized());
+  EXPECT_GT(mean_dot / mesh.vertices.size(), 0.7);
+  // Memory follows the surface: the band is a thin shell, far from all of V.
+  EXPECT_LT(st.active_voxels, OptionsFor(scene, voxel).GridSize().prod() / 4);
+}
+
+INSTANTIATE_TEST_SUITE_P(Shapes, FusionAccuracy, ::testing::Values("sphere", "box"));
+
+TEST(ProbabilisticFusion, OrderIndependent) {
+  const synth::Scene scene = BoxScene();
+  const Rendered data = RenderAll(scene, testing::SphereRig(24, Eigen::Vector3d::Zero(), 0.6, 160, 90, 40));
+  const FusionOptions options = OptionsFor(scene, 0.004);
+  std::vector<int> order(data.views.size());
+  for (std::size_t i = 0; i < order.size(); ++i) order[i] = static_cast<int>(i);
+  std::vector<int> shuffled = order;
+  std::mt19937 rng(7);
+  std::shuffle(shuffled.begin(), shuffled.end(), rng);
+  std::vector<int> reversed(order.rbegin(), order.rend());
+
+  const ProbabilisticFusion a = Fuse(options, data, order);
+  std::map<std::tuple<int, int, int>, std::pair<double, int>> ha;
+  a.ForEachVoxel([&](const Eigen::Vector3i& v, double sum, int n) {
+    ha[{v.x(), v.y(), v.z()}] = {n > 0 ? std::exp(sum / n) : 0.0, n};
+  });
+  ASSERT_GT(ha.size(), 1000u);
+  for (const auto& other_order : {shuffled, reversed}) {
+    const ProbabilisticFusion b = Fuse(options, data, other_order);
+    std::size_t count = 0;
+    double max_diff = 0;
+    int count_mismatch = 0;
+    b.ForEachVoxel([&](const Eigen::Vector3i& v, double sum, int n) {
+      ++count;
+      const auto it = ha.find({v.x(), v.y(), v.z()});
+      ASSERT_NE(it, ha.end());
+      max_diff = std::max(max_diff, std::abs((n > 0 ? std::exp(sum / n) : 0.0) - it->second.first));
+      count_mismatch += n != it->second.second;
+    });
+    std::printf("order: %zu voxels, max |ΔH| = %.3g\n", count, max_diff);
+    EXPECT_EQ(count, ha.size());
+    EXPECT_EQ(count_mismatch, 0);
+    EXPECT_LE(max_diff, 1e-5);
+  }
+  // A re-issued view (same id) is ignored instead of counted twice.
+  {
+    ProbabilisticFusion c(options);
+    EXPECT_TRUE(c.Integrate(data.views[0], data.depths[0], 0));
+    const std::size_t active = c.Stats().active_voxels;
+    EXPECT_FALSE(c.Integrate(data.views[0], data.depths[0], 0));
+    EXPECT_EQ(c.NumViews(), 1);
+    EXPECT_EQ(c.Stats().active_voxels, active);
+    EXPECT_TRUE(c.HasView(0));
+  }
+  // Half-way, H is already readable and most active voxels have evidence.
+  ProbabilisticFusion half(options);
+  for (int i = 0; i < 12; ++i) half.Integrate(data.views[i], data.depths[i]);
+  // Voxels activated at grazing angles may still lack evidence (their centre
+  // projects onto a nearer neighbouring pixel, so they are occluded there).
+  std::size_t empty = 0, total = 0;
+  half.ForEachVoxel([&](const Eigen::Vector3i&, double, int n) {
+    empty += n == 0;
+    ++total;
+  });
+  EXPECT_LT(empty, total / 10);
+  EXPECT_GT(half.ExtractMesh().triangles.size(), 0u);
+}
+
+TEST(ProbabilisticFusion, BackgroundRaysCarveFreeSpace) {
+  // Nothing in V; view 0 claims a foreground patch (an outlier), the others see background through it.
+  synth::Scene scene("empty");
+  scene.set_foreground_bbox(Box(Eigen::Vector3d::Constant(-0.1), Eigen::Vector3d::Constant(0.1)));
+  testing::AddDome(&scene);
+  const std::vector<PinholeView> views = testing::SphereRig(12, Eigen::Vector3d::Zero(), 0.6, 160, 90, 40);
+  FusionOptions options = OptionsFor(scene, 0.004);
+  ProbabilisticFusion fusion(options);
+  DepthMap outlier = ExactDepth(scene, views[0]);
+  const cv::Rect patch(70, 35, 20, 20);
+  outlier.depth(patch).setTo(0.6f);  // the patch lies around V's centre
+  outlier.label(patch).setTo(static_cast<int>(DepthLabel::kForeground));
+  fusion.Integrate(views[0], outlier);
+  // Alone, the outlier is a confident surface.
+  const Eigen::Vector3i centre_voxel = fusion.VoxelIndex(views[0].Unproject({80, 45}, 0.6));
+  EXPECT_GT(fusion.SurfaceProbability(centre_voxel), 0.8);
+  for (std::size_t i = 1; i < views.size(); ++i) fusion.Integrate(views[i], ExactDepth(scene, views[i]));
+
+  const double p_free = SurfaceEvidence::Probability(-1.0, options.sigma_s, options.probability_clamp);
+  std::size_t active = 0, above = 0, only_free = 0;
+  double max_only_free_error = 0;
+  fusion.ForEachVoxel([&](const Eigen::Vector3i& v, double sum, int n) {
+    ++active;
+    const double h = std::exp(sum / n);
+    above += h >= options.surface_threshold;
+    // Voxels in front of the patch by more than the margin are free in every view.
+    const Eigen::Vector3d x = fusion.VoxelCenter(v);
+    Eigen::Vector2d px;
+    const double z = views[0].Project(x, &px);
+    if (z < 0.6 - 2 * options.SigmaV() && patch.contains(cv::Point(static_cast<int>(px.x()), static_cast<int>(px.y()))) &&
+        px.x() > patch.x + 1 && px.y() > patch.y + 1 && px.x() < patch.br().x - 1 && px.y() < patch.br().y - 1) {
+      ++only_free;
+      max_only_free_error = std::max(max_only_free_error, std::abs(h - p_free));
+    }
+  });
+  EXPECT_GT(active, 100u);
+  EXPECT_EQ(above, 0u) << "every voxel of the outlier's band is seen as free space by the other views";
+  EXPECT_GT(only_free, 10u);
+  EXPECT_LT(max_only_free_error, 1e-6) << "a voxel seen only as free space has H = P(c = -1)";
+  EXPECT_LT(p_free, options.surface_threshold);
+  EXPECT_EQ(fusion.SurfaceProbability(centre_voxel) < options.surface_threshold, true);
+  EXPECT_EQ(fusion.ExtractMesh().triangles.size(), 0u);
+}
+
+TEST(ProbabilisticFusion, ThinCylinderTwoVoxelsAcrossSurvives) {
+  // A textureless rod 4 mm across, fused with 2 mm voxels.
+  synth::Scene scene("rod");
+  scene.set_foreground_bbox(Box({-0.02, -0.02, -0.06}, {0.02, 0.02, 0.06}));
+  scene.Add(synth::Primitive::Cylinder({0, 0, -0.05}, {0.0, 0.0, 0.05}, 0.002, synth::Material::Flat({0.9f, 0.9f, 0.9f}))
+                .Named("rod")
+                .Foreground());
+  testing::AddDome(&scene);
+  ASSERT_TRUE(scene.primitive(0).thin);
+  const double voxel = 0.002;
+  const Rendered data =
+      RenderAll(scene, testing::RingRig(12, {-25, 0, 25}, Eigen::Vector3d::Zero(), 0.25, 160, 90, 50));
+  const ProbabilisticFusion fusion = Fuse(OptionsFor(scene, voxel), data);
+  const TriangleMesh mesh = fusion.ExtractMesh();
+  const TriangleMesh thin = synth::GroundTruthMesh(scene, true);
+  ASSERT_GT(thin.triangles.size(), 0u);
+  const MeshMetrics m = Score(mesh, synth::GroundTruthMesh(scene), &thin, voxel, scene.foreground_bbox());
+  std::printf("rod: %zu triangles; P %.4f R %.4f thin recall %.4f at %.0f mm\n", mesh.triangles.size(),
+              m.scores[0].precision, m.scores[0].recall, m.scores[0].thin_recall, voxel * 1000);
+  EXPECT_GE(m.scores[0].thin_recall, 0.9);
+  EXPECT_GE(m.scores[0].precision, 0.9);
+}
+
+TEST(ProbabilisticFusion, RejectsBadOptionsAndSizes) {
+  FusionOptions o;
+  EXPECT_THROW(ProbabilisticFusion{o}, OptionError);  // empty V
+  o.volume = Box(Eigen::Vector3d::Zero(), Eigen::Vector3d::Ones());
+  o.voxel_size = 0;
+  EXPECT_THROW(ProbabilisticFusion{o}, OptionError);
+  o.voxel_size = 0.01;
+  o.sigma_s = -1;
+  EXPECT_THROW(ProbabilisticFusion{o}, OptionError);
+  o.sigma_s = 1.3;  // a free-space vote would stay above 0.2: nothing could be carved
+  EXPECT_THROW(ProbabilisticFusion{o}, OptionError);
+  o.sigma_s = 0.7;
+  o.free_space_margin = 5;  // beyond the band
+  EXPECT_THROW(ProbabilisticFusion{o}, OptionError);
+  o.free_space_margin = 0;
+  ProbabilisticFusion f(o);
+  const PinholeView view = testing::LookAtView({2, 0, 0.5}, {0.5, 0.5, 0.5}, 64, 48, 40);
+  EXPECT_THROW(f.Integrate(view, DepthMap(10, 10)), std::invalid_argument);
+  MeshingOptions mo;
+  mo.min_views = 0;
+  EXPECT_THROW(f.ExtractMesh(mo), OptionError);
+}
+
+TEST(ProbabilisticFusion, WritesVdb) {
+  const synth::Scene scene = SphereScene();
+  const Rendered data = RenderAll(scene, testing::SphereRig(8, Eigen::Vector3d::Zero(), 0.6, 80, 45, 40));
+  const ProbabilisticFusion fusion = Fuse(OptionsFor(scene, 0.008), data);
+  const auto path = std::filesystem::temp_directory_path() / ("lfrecon_fusion_test_" + std::to_string(getpid()) + ".vdb");
+  fusion.WriteVdb(path);
+  ASSERT_TRUE(std::filesystem::exists(path));
+  EXPECT_GT(std::filesystem::file_size(path), 1000u);
+  std::filesystem::remove(path);
+  EXPECT_THROW(fusion.WriteVdb("/nonexistent-dir/x.vdb"), std::runtime_error);
+}
+
+}  // namespace
+}  // namespace lfrecon
