@@ -59,9 +59,11 @@ TEST(DepthFilter, RaisesAccuracyOnOcclusionScene) {
   EXPECT_GE(a_filtered, 0.7);
   // Background depths are kept as they are.
   for (int r = 0; r < sparse.depth.rows; ++r)
-    for (int c = 0; c < sparse.depth.cols; ++c)
-      if (sparse.label.at<std::uint8_t>(r, c) == static_cast<std::uint8_t>(DepthLabel::kBackground))
+    for (int c = 0; c < sparse.depth.cols; ++c) {
+      if (sparse.label.at<std::uint8_t>(r, c) == static_cast<std::uint8_t>(DepthLabel::kBackground)) {
         ASSERT_EQ(sparse.depth.at<float>(r, c), filtered.depth.at<float>(r, c));
+      }
+    }
 }
 
 TEST(VoteGrid, AddThenRemoveLeavesNoVotes) {
