@@ -14,41 +14,17 @@
 
 #include "io/transforms_json.h"
 #include "util/error.h"
+#include "common/test_util.h"
 
 namespace lfrecon {
 namespace {
+
+using testing::TempDir;
+using testing::ExpectInputError;
 namespace fs = std::filesystem;
 
 // A per-test folder under the system temp folder, removed afterwards.
-class TempDir {
- public:
-  TempDir() {
-    const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
-    path_ = fs::temp_directory_path() /
-            ("lfrecon_io_colmap_" + std::string(info->name()) + "_" + std::to_string(::getpid()));
-    fs::remove_all(path_);
-    fs::create_directories(path_);
-  }
-  ~TempDir() { fs::remove_all(path_); }
-  const fs::path& path() const { return path_; }
-
- private:
-  fs::path path_;
-};
-
 // Runs f and expects an InputError whose message contains every needle.
-void ExpectInputError(const std::function<void()>& f, const std::vector<std::string>& needles) {
-  try {
-    f();
-    ADD_FAILURE() << "no InputError thrown";
-  } catch (const InputError& e) {
-    for (const std::string& n : needles)
-      EXPECT_NE(std::string(e.what()).find(n), std::string::npos) << "'" << n << "' not in: " << e.what();
-  } catch (const std::exception& e) {
-    ADD_FAILURE() << "expected InputError, got: " << e.what();
-  }
-}
-
 ColmapModel MakeModel() {
   ColmapModel model;
   const std::vector<std::pair<CameraModelId, std::vector<double>>> specs = {
