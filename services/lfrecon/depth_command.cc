@@ -23,35 +23,6 @@ namespace fs = std::filesystem;
 
 namespace {
 
-// "A:B:STEP", "A:B", "A" -> view indices within [0, n).
-std::vector<int> ParseViews(const std::string& spec, int n) {
-  std::vector<int> out;
-  if (spec.empty()) {
-    for (int i = 0; i < n; ++i) out.push_back(i);
-    return out;
-  }
-  int a = 0, b = n, step = 1;
-  try {
-    const auto c1 = spec.find(':');
-    if (c1 == std::string::npos) {
-      a = std::stoi(spec);
-      b = a + 1;
-    } else {
-      if (c1 > 0) a = std::stoi(spec.substr(0, c1));
-      const auto c2 = spec.find(':', c1 + 1);
-      const std::string bs = spec.substr(c1 + 1, c2 == std::string::npos ? std::string::npos : c2 - c1 - 1);
-      if (!bs.empty()) b = std::stoi(bs);
-      if (c2 != std::string::npos) step = std::stoi(spec.substr(c2 + 1));
-    }
-  } catch (const std::exception&) {
-    throw OptionError("--views: expected A:B:STEP, got '" + spec + "'");
-  }
-  if (step <= 0 || a < 0 || a >= n || b <= a)
-    throw OptionError("--views " + spec + ": need 0 <= A < " + std::to_string(n) + ", B > A, STEP > 0");
-  for (int i = a; i < std::min(b, n); i += step) out.push_back(i);
-  return out;
-}
-
 std::string Stem(const std::string& name) { return fs::path(name).stem().string(); }
 
 struct DepthArgs {
@@ -65,7 +36,7 @@ int RunDepth(const DepthArgs& args) {
   const Dataset ds = Dataset::Open(args.data.Resolve());
   if (args.stage != "sparse" && args.stage != "filtered")
     throw OptionError("--stage must be sparse or filtered (dense comes with propagation)");
-  const std::vector<int> wanted = ParseViews(args.views, ds.NumViews());
+  const std::vector<int> wanted = ParseViewRange(args.views, ds.NumViews());
   StreamingDepthOptions options;
   options.run_filter = args.stage == "filtered";
   std::vector<PinholeView> views;
