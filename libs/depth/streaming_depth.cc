@@ -97,6 +97,17 @@ StreamingDepthStats StreamingDepth::Run(FrameSource& frames, const std::vector<i
       v.image = frame.image;
       PrepareViewImage(&v, options_.gradient);
     }
+    if (frame_tap_) {
+      const auto h = held.find(f);
+      if (h != held.end()) {
+        frame_tap_(f, h->second);
+      } else {
+        ViewImage v;
+        v.view = views_[f];
+        v.image = frame.image;
+        frame_tap_(f, v);
+      }
+    }
     if (is_wanted[f]) wanted_frames[f] = frame.image;
     stats.max_frames_held = std::max(stats.max_frames_held, static_cast<int>(held.size()));
 

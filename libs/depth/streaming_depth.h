@@ -43,10 +43,20 @@ class StreamingDepth {
   // view in `wanted` (all views when empty), in the order they complete.
   StreamingDepthStats Run(FrameSource& frames, const std::vector<int>& wanted, const Sink& sink);
 
+  // Optional: called once for every frame read, in sequence order, before any
+  // sink call at that frame. The ViewImage is the one the depth stage holds
+  // (smoothed/grey filled) when it keeps the frame, else view + image only.
+  // Every frame within gradient.max_view_angle_deg of view i has been tapped
+  // before sink(i) is called, so a consumer can keep its own window of the
+  // neighbours' frames (the embedded pipeline's densification does).
+  using FrameTap = std::function<void(int, const ViewImage&)>;
+  void SetFrameTap(FrameTap tap) { frame_tap_ = std::move(tap); }
+
  private:
   std::vector<PinholeView> views_;
   BoundingBox volume_;
   StreamingDepthOptions options_;
+  FrameTap frame_tap_;
 };
 
 }  // namespace lfrecon

@@ -4,6 +4,8 @@
 #include <spdlog/spdlog.h>
 
 #include <filesystem>
+#include <map>
+#include <memory>
 #include <iostream>
 #include <nlohmann/json.hpp>
 #include <opencv2/core.hpp>
@@ -12,6 +14,9 @@
 #include "dataset_flags.h"
 #include "depth/streaming_depth.h"
 #include "eval/depth_metrics.h"
+#include "geometry/view_graph.h"
+#include "propagation/depth_propagator.h"
+#include "propagation/edge_preview.h"
 #include "io/dataset.h"
 #include "io/depth_map_io.h"
 #include "util/error.h"
@@ -34,24 +39,59 @@ struct DepthArgs {
 
 int RunDepth(const DepthArgs& args) {
   const Dataset ds = Dataset::Open(args.data.Resolve());
-  if (args.stage != "sparse" && args.stage != "filtered")
-    throw OptionError("--stage must be sparse or filtered (dense comes with propagation)");
+  if (args.stage != "sparse" && args.stage != "filtered" && args.stage != "dense")
+    throw OptionError("--stage must be sparse, filtered or dense");
+  const bool dense = args.stage == "dense";
   const std::vector<int> wanted = ParseViewRange(args.views, ds.NumViews());
   StreamingDepthOptions options;
-  options.run_filter = args.stage == "filtered";
+  options.run_filter = args.stage != "sparse";  // dense densifies the filtered map
   std::vector<PinholeView> views;
   for (int i = 0; i < ds.NumViews(); ++i) views.push_back(ds.View(i));
   for (const char* sub : {"depth", "confidence", "preview"}) fs::create_directories(args.out / sub);
+  if (dense) fs::create_directories(args.out / "edges");
   auto frames = ds.OpenFrames();
   StreamingDepth stage(views, ds.bbox(), options);
+
+  // Dense (§4) needs the frames within 5° of each wanted view: keep a
+  // reference-counted window of them, filled by the depth stage's frame tap.
+  PropagationOptions popt;
+  popt.photo.presmooth_sigma = options.gradient.presmooth_sigma;  // reuse the depth stage's smoothed frames
+  const DepthPropagator propagator(popt);
+  std::vector<int> refs(views.size(), 0);
+  std::map<int, ViewImage> window;
+  std::unique_ptr<ViewGraph> near;
+  if (dense) {
+    std::vector<Eigen::Vector3d> dirs;
+    for (const auto& v : views) dirs.push_back(v.ViewingDirection());
+    near = std::make_unique<ViewGraph>(dirs, popt.photo.max_view_angle_deg);
+    for (int i : wanted) {
+      ++refs[i];
+      for (int j : near->Neighbors(i)) ++refs[j];
+    }
+    stage.SetFrameTap([&](int f, const ViewImage& v) {
+      if (refs[f] > 0) window[f] = v;
+    });
+  }
   spdlog::info("depth: {} of {} views, stage {}, output {}", wanted.size(), ds.NumViews(), args.stage,
                args.out.string());
   Timer timer;
   long long valid = 0;
   const StreamingDepthStats stats =
       stage.Run(*frames, wanted, [&](int i, const cv::Mat& image, const DepthMap& sparse, const DepthMap& filtered) {
-        const DepthMap& m = options.run_filter ? filtered : sparse;
         const std::string stem = Stem(ds.views()[i].name);
+        DepthMap densified;
+        if (dense) {
+          std::vector<const ViewImage*> nbs;
+          for (int j : near->Neighbors(i))
+            if (window.count(j)) nbs.push_back(&window.at(j));
+          const DenseDepthResult r = propagator.Run(window.at(i), nbs, filtered, ds.bbox());
+          densified = r.dense;
+          WriteEdgePreview(args.out / "edges" / (stem + ".png"), image, r.edges.Classify(popt.photo.silhouette_ratio));
+          for (int j : near->Neighbors(i))
+            if (--refs[j] == 0) window.erase(j);
+          if (--refs[i] == 0) window.erase(i);
+        }
+        const DepthMap& m = dense ? densified : options.run_filter ? filtered : sparse;
         WritePfm(args.out / "depth" / (stem + ".pfm"), m.depth);
         WritePfm(args.out / "confidence" / (stem + ".pfm"), m.confidence);
         WriteDepthPreview(args.out / "preview" / (stem + ".png"), m.depth, image);
@@ -128,11 +168,13 @@ int RunEvalDepth(const EvalDepthArgs& args) {
 
 void AddDepthCommand(CLI::App& root, int* exit_code) {
   auto args = std::make_shared<DepthArgs>();
-  auto* cmd = root.add_subcommand("depth", "Per-view depth maps: sparse depth from gradients (§3.1), filtered (§3.2)");
+  auto* cmd = root.add_subcommand(
+      "depth", "Per-view depth maps: sparse depth from gradients (§3.1), filtered (§3.2), dense (§4)");
   args->data.AddTo(cmd);
   cmd->add_option("--out", args->out, "Output folder (depth/, confidence/, preview/)")->required();
   cmd->add_option("--views", args->views, "Views to write, A:B:STEP (0-based, B exclusive); default all");
-  cmd->add_option("--stage", args->stage, "sparse or filtered")->capture_default_str();
+  cmd->add_option("--stage", args->stage, "sparse (§3.1), filtered (§3.2) or dense (§4; also writes edges/ previews)")
+      ->capture_default_str();
   cmd->callback([args, exit_code] { *exit_code = RunDepth(*args); });
 
   auto eargs = std::make_shared<EvalDepthArgs>();
