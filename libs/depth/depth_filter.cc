@@ -75,14 +75,8 @@ DepthMap VoteGrid::Filter(const DepthMap& map, const PinholeView& view) const {
   out.confidence = map.confidence.clone();
   out.label = map.label.clone();
   // Planar-depth interval of V seen from this view bounds the ray march.
-  double zmin = 1e300, zmax = 0;
-  for (int c = 0; c < 8; ++c) {
-    const Eigen::Vector3d corner((c & 1) ? volume_.max.x() : volume_.min.x(), (c & 2) ? volume_.max.y() : volume_.min.y(),
-                                 (c & 4) ? volume_.max.z() : volume_.min.z());
-    const double z = (view.R * corner + view.t).z();
-    zmin = std::min(zmin, z);
-    zmax = std::max(zmax, z);
-  }
+  double zmin, zmax;
+  PlanarDepthRange(view, volume_, &zmin, &zmax);
   zmin = std::max(zmin, 1e-6);
   tbb::parallel_for(tbb::blocked_range<int>(0, map.depth.rows), [&](const tbb::blocked_range<int>& range) {
     for (int r = range.begin(); r != range.end(); ++r) {
@@ -100,7 +94,7 @@ DepthMap VoteGrid::Filter(const DepthMap& map, const PinholeView& view) const {
         }
         float best = -1;
         double best_d = 0;
-        float prev = 0, prev2 = 0;
+        float prev = 0;
         double best_prev = 0, best_next = 0;
         bool want_next = false;
         for (double z = lo; z <= hi; z += step) {
@@ -116,10 +110,8 @@ DepthMap VoteGrid::Filter(const DepthMap& map, const PinholeView& view) const {
             want_next = true;
             best_next = v;
           }
-          prev2 = prev;
           prev = v;
         }
-        (void)prev2;
         if (best < options_.min_votes) {
           out.depth.at<float>(r, col) = 0;
           out.confidence.at<float>(r, col) = 0;

@@ -121,9 +121,8 @@ struct ShiftMeasurement {
 
 class PixelSolver {
  public:
-  PixelSolver(const GradientDepthOptions& o, const cv::Mat& ref_grey, const Eigen::Vector2d& p,
-              const Eigen::Vector3f& ref_colour)
-      : o_(o), ref_grey_(ref_grey), p_(p), ref_colour_(ref_colour), half_(o.patch_length / 2),
+  PixelSolver(const GradientDepthOptions& o, const cv::Mat& ref_grey, const Eigen::Vector3f& ref_colour)
+      : o_(o), ref_grey_(ref_grey), ref_colour_(ref_colour), half_(o.patch_length / 2),
         inv_two_sigma_c2_(1.0 / (2.0 * o.sigma_c * o.sigma_c)) {}
 
   // The 2×5 patch at line coordinate s (reference depth D(s)) and its least-squares shift.
@@ -219,7 +218,6 @@ class PixelSolver {
  private:
   const GradientDepthOptions& o_;
   const cv::Mat& ref_grey_;
-  Eigen::Vector2d p_;
   Eigen::Vector3f ref_colour_;
   int half_;
   double inv_two_sigma_c2_;
@@ -317,14 +315,8 @@ DepthMap GradientDepthEstimator::Estimate(const ViewImage& reference, const std:
   // Search range from V.
   double d_near = o.min_depth, d_far = o.max_depth;
   if (d_far <= 0) {
-    double zmin = std::numeric_limits<double>::max(), zmax = 0;
-    for (int c = 0; c < 8; ++c) {
-      const Eigen::Vector3d corner((c & 1) ? volume.max.x() : volume.min.x(), (c & 2) ? volume.max.y() : volume.min.y(),
-                                   (c & 4) ? volume.max.z() : volume.min.z());
-      const double z = (vi.R * corner + vi.t).z();
-      zmin = std::min(zmin, z);
-      zmax = std::max(zmax, z);
-    }
+    double zmin, zmax;
+    PlanarDepthRange(vi, volume, &zmin, &zmax);
     if (!(zmax > 0)) {
       spdlog::warn("depth: V is behind the reference camera; empty depth map");
       return out;
@@ -351,7 +343,7 @@ DepthMap GradientDepthEstimator::Estimate(const ViewImage& reference, const std:
         const Eigen::Vector3d ph(p.x(), p.y(), 1.0);
         const float* srow = ref_prepared->smoothed.ptr<float>(r);
         const Eigen::Vector3f colour(srow[3 * c], srow[3 * c + 1], srow[3 * c + 2]);
-        PixelSolver solver(o, ref_prepared->grey, p, colour);
+        PixelSolver solver(o, ref_prepared->grey, colour);
         for (size_t k = 0; k < pairs.size(); ++k) ray_ok[k] = rays[k].Init(pairs[k], ph);
 
         // Level 1: scan the whole depth range in the first-level views; a

@@ -1,5 +1,7 @@
 #include "geometry/pinhole_view.h"
 
+#include <algorithm>
+#include <limits>
 #include <stdexcept>
 
 namespace lfrecon {
@@ -30,6 +32,18 @@ Eigen::Vector3d PinholeView::Unproject(const Eigen::Vector2d& pixel, double dept
 
 Eigen::Vector3d PinholeView::RayDirection(const Eigen::Vector2d& pixel) const {
   return (R.transpose() * (K_inv * Eigen::Vector3d(pixel.x(), pixel.y(), 1.0))).normalized();
+}
+
+void PlanarDepthRange(const PinholeView& view, const BoundingBox& box, double* zmin, double* zmax) {
+  *zmin = std::numeric_limits<double>::infinity();
+  *zmax = -std::numeric_limits<double>::infinity();
+  for (int c = 0; c < 8; ++c) {
+    const Eigen::Vector3d corner((c & 1) ? box.max.x() : box.min.x(), (c & 2) ? box.max.y() : box.min.y(),
+                                 (c & 4) ? box.max.z() : box.min.z());
+    const double z = (view.R * corner + view.t).z();
+    *zmin = std::min(*zmin, z);
+    *zmax = std::max(*zmax, z);
+  }
 }
 
 void RelativePose(const PinholeView& i, const PinholeView& j, Eigen::Matrix3d* R_ji, Eigen::Vector3d* t_ji) {

@@ -6,6 +6,7 @@
 
 #include "geometry/camera.h"
 #include "geometry/rigid3.h"
+#include "geometry/triangle_mesh.h"
 
 namespace lfrecon {
 
@@ -34,6 +35,10 @@ struct PinholeView {
     return pixel.x() >= 0 && pixel.y() >= 0 && pixel.x() < width && pixel.y() < height;
   }
 };
+
+// Smallest and largest planar depth of the corners of `box` seen from `view`
+// (negative for corners behind the camera).
+void PlanarDepthRange(const PinholeView& view, const BoundingBox& box, double* zmin, double* zmax);
 
 // Relative pose of view j with respect to view i: x_j = R_ji x_i + t_ji.
 void RelativePose(const PinholeView& i, const PinholeView& j, Eigen::Matrix3d* R_ji, Eigen::Vector3d* t_ji);

@@ -54,8 +54,7 @@ inline cv::Point NeighborStep(const cv::Vec2f& n) {
 
 }  // namespace
 
-SplatMaps DepthPropagator::Splat(const DepthMap& filtered, const EdgeConsistency& edges) const {
-  const int rows = filtered.depth.rows, cols = filtered.depth.cols;
+SplatMaps SplatMaps::Zeros(int rows, int cols) {
   SplatMaps s;
   s.depth_fg = cv::Mat::zeros(rows, cols, CV_32F);
   s.confidence_fg = cv::Mat::zeros(rows, cols, CV_32F);
@@ -63,6 +62,12 @@ SplatMaps DepthPropagator::Splat(const DepthMap& filtered, const EdgeConsistency
   s.confidence_bg = cv::Mat::zeros(rows, cols, CV_32F);
   s.edge_label = cv::Mat::zeros(rows, cols, CV_8U);
   s.edge_depth = cv::Mat::zeros(rows, cols, CV_32F);
+  return s;
+}
+
+SplatMaps DepthPropagator::Splat(const DepthMap& filtered, const EdgeConsistency& edges) const {
+  const int rows = filtered.depth.rows, cols = filtered.depth.cols;
+  SplatMaps s = SplatMaps::Zeros(rows, cols);
   if (filtered.depth.empty() || edges.evaluated.size() != filtered.depth.size() ||
       filtered.label.size() != filtered.depth.size())
     return s;

@@ -31,6 +31,26 @@ struct SynthViews {
   }
 };
 
+// Renders `reference` of `sequence`, its views within `angle` and the ground truth.
+inline SynthViews MakeSynthViewsOf(std::shared_ptr<synth::SynthSequence> sequence, int reference = 0,
+                                   double angle = 5.0) {
+  SynthViews v;
+  v.sequence = std::move(sequence);
+  v.volume = v.sequence->scene().foreground_bbox();
+  v.reference = reference;
+  std::vector<Eigen::Vector3d> dirs;
+  for (int i = 0; i < v.sequence->NumFrames(); ++i) dirs.push_back(v.sequence->View(i).ViewingDirection());
+  const ViewGraph graph(dirs, angle);
+  v.neighbor_ids = graph.Neighbors(reference);
+  v.truth = v.sequence->Render(reference);
+  v.ref = ViewImage{v.sequence->View(reference), v.truth.image, cv::Mat(), cv::Mat()};
+  for (int j : v.neighbor_ids)
+    v.neighbors.push_back(ViewImage{v.sequence->View(j), v.sequence->RenderImage(j), cv::Mat(), cv::Mat()});
+  v.foreground = synth::ForegroundMask(v.sequence->scene(), v.truth.labels);
+  cv::dilate(v.truth.mixed, v.near_edge, cv::Mat::ones(5, 5, CV_8U));
+  return v;
+}
+
 inline SynthViews MakeSynthViews(const std::string& scene, int reference = 0, double angle = 5.0,
                                  int width = 320, int height = 180, int frames = 480,
                                  synth::PathType path = synth::PathType::kCircle, double noise = -1) {
@@ -41,20 +61,19 @@ inline SynthViews MakeSynthViews(const std::string& scene, int reference = 0, do
   o.height = height;
   o.path = path;
   if (noise >= 0) o.render.noise_sigma = noise;
-  SynthViews v;
-  v.sequence = std::make_shared<synth::SynthSequence>(synth::SynthSequence::Create(o));
-  v.volume = v.sequence->scene().foreground_bbox();
-  v.reference = reference;
-  std::vector<Eigen::Vector3d> dirs;
-  for (int i = 0; i < v.sequence->NumFrames(); ++i) dirs.push_back(v.sequence->View(i).ViewingDirection());
-  const ViewGraph graph(dirs, angle);
-  v.neighbor_ids = graph.Neighbors(reference);
-  v.truth = v.sequence->Render(reference);
-  v.ref = ViewImage{v.sequence->View(reference), v.truth.image, cv::Mat(), cv::Mat()};
-  for (int j : v.neighbor_ids) v.neighbors.push_back(ViewImage{v.sequence->View(j), v.sequence->RenderImage(j), cv::Mat(), cv::Mat()});
-  v.foreground = synth::ForegroundMask(v.sequence->scene(), v.truth.labels);
-  cv::dilate(v.truth.mixed, v.near_edge, cv::Mat::ones(5, 5, CV_8U));
-  return v;
+  return MakeSynthViewsOf(std::make_shared<synth::SynthSequence>(synth::SynthSequence::Create(o)), reference, angle);
+}
+
+// A scene built by the test: reference 0 of a 480-frame circle around
+// `target`, its views within 5°, 320×180.
+inline SynthViews MakeCustomViews(synth::Scene scene, const Eigen::Vector3d& target, double radius, double height) {
+  synth::CameraPathOptions path;
+  path.num_frames = 480;
+  path.target = target;
+  path.radius = radius;
+  path.height = height;
+  return MakeSynthViewsOf(std::make_shared<synth::SynthSequence>(
+      std::move(scene), Camera::PinholeFromHfov(320, 180, 55.0), path, synth::RenderOptions(), 1));
 }
 
 struct Score {

@@ -12,38 +12,11 @@ namespace lfrecon {
 namespace {
 
 using testing::MakeSynthViews;
+using testing::MakeCustomViews;
 using testing::SynthViews;
 
 constexpr std::uint8_t kSil = static_cast<std::uint8_t>(EdgeClass::kSilhouette);
 constexpr std::uint8_t kTex = static_cast<std::uint8_t>(EdgeClass::kTexture);
-
-// Like MakeSynthViews, for a scene built here: reference 0 of a 480-frame
-// circle around `target`, its views within 5°, 320×180.
-SynthViews MakeCustomViews(synth::Scene scene, const Eigen::Vector3d& target, double radius, double height) {
-  synth::CameraPathOptions path;
-  path.num_frames = 480;
-  path.target = target;
-  path.radius = radius;
-  path.height = height;
-  SynthViews v;
-  v.volume = scene.foreground_bbox();
-  v.sequence = std::make_shared<synth::SynthSequence>(std::move(scene), Camera::PinholeFromHfov(320, 180, 55.0), path,
-                                                      synth::RenderOptions(), 1);
-  std::vector<Eigen::Vector3d> dirs;
-  for (int i = 0; i < v.sequence->NumFrames(); ++i) dirs.push_back(v.sequence->View(i).ViewingDirection());
-  v.neighbor_ids = ViewGraph(dirs, 5.0).Neighbors(0);
-  v.truth = v.sequence->Render(0);
-  v.ref.view = v.sequence->View(0);
-  v.ref.image = v.truth.image;
-  for (int j : v.neighbor_ids) {
-    v.neighbors.emplace_back();
-    v.neighbors.back().view = v.sequence->View(j);
-    v.neighbors.back().image = v.sequence->RenderImage(j);
-  }
-  v.foreground = synth::ForegroundMask(v.sequence->scene(), v.truth.labels);
-  cv::dilate(v.truth.mixed, v.near_edge, cv::Mat::ones(5, 5, CV_8U));
-  return v;
-}
 
 // Three textured cards at 0.8-0.95 m, turned 10-25° about the vertical,
 // in front of a textured wall at 1.9 m: occluding contours with no limbs.

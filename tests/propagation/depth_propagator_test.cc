@@ -11,37 +11,11 @@
 namespace lfrecon {
 namespace {
 
+using testing::MakeCustomViews;
 using testing::SynthViews;
 
 constexpr std::uint8_t kFg = static_cast<std::uint8_t>(DepthLabel::kForeground);
 constexpr std::uint8_t kBg = static_cast<std::uint8_t>(DepthLabel::kBackground);
-
-// Reference 0 of a 480-frame circle around `target` and its views within 5°, 320×180.
-SynthViews MakeCustomViews(synth::Scene scene, const Eigen::Vector3d& target, double radius, double height) {
-  synth::CameraPathOptions path;
-  path.num_frames = 480;
-  path.target = target;
-  path.radius = radius;
-  path.height = height;
-  SynthViews v;
-  v.volume = scene.foreground_bbox();
-  v.sequence = std::make_shared<synth::SynthSequence>(std::move(scene), Camera::PinholeFromHfov(320, 180, 55.0), path,
-                                                      synth::RenderOptions(), 1);
-  std::vector<Eigen::Vector3d> dirs;
-  for (int i = 0; i < v.sequence->NumFrames(); ++i) dirs.push_back(v.sequence->View(i).ViewingDirection());
-  v.neighbor_ids = ViewGraph(dirs, 5.0).Neighbors(0);
-  v.truth = v.sequence->Render(0);
-  v.ref.view = v.sequence->View(0);
-  v.ref.image = v.truth.image;
-  for (int j : v.neighbor_ids) {
-    v.neighbors.emplace_back();
-    v.neighbors.back().view = v.sequence->View(j);
-    v.neighbors.back().image = v.sequence->RenderImage(j);
-  }
-  v.foreground = synth::ForegroundMask(v.sequence->scene(), v.truth.labels);
-  cv::dilate(v.truth.mixed, v.near_edge, cv::Mat::ones(5, 5, CV_8U));
-  return v;
-}
 
 // A textured-boundary, smooth-interior object: a textured panel (0.30 × 0.22 m)
 // turned 25° about the vertical, with a flat-coloured panel (0.20 × 0.13 m)
@@ -215,13 +189,7 @@ TEST(DepthPropagator, FilterReproducesAPlaneFromItsEdgesAndKeepsSidesApart) {
   cv::rectangle(image, cv::Rect(100, 20, 40, 60), cv::Scalar(0.1, 0.7, 0.2), cv::FILLED);
   // Depth of a plane: its inverse is affine in the pixel coordinates.
   const auto plane = [](int r, int c) { return 1.0f / (0.8f + 0.002f * c - 0.001f * r); };
-  SplatMaps s;
-  s.depth_fg = cv::Mat::zeros(rows, cols, CV_32F);
-  s.confidence_fg = cv::Mat::zeros(rows, cols, CV_32F);
-  s.depth_bg = cv::Mat::zeros(rows, cols, CV_32F);
-  s.confidence_bg = cv::Mat::zeros(rows, cols, CV_32F);
-  s.edge_label = cv::Mat::zeros(rows, cols, CV_8U);
-  s.edge_depth = cv::Mat::zeros(rows, cols, CV_32F);
+  SplatMaps s = SplatMaps::Zeros(rows, cols);
   for (int r = 20; r < 80; ++r)
     for (int c = 20; c < 80; ++c)
       if (r < 23 || r >= 77 || c < 23 || c >= 77) {  // a 3 px frame inside the square
