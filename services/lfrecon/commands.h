@@ -10,5 +10,6 @@ void AddInfoCommand(CLI::App& root, int* exit_code);
 void AddSynthCommand(CLI::App& root, int* exit_code);
 void AddEvalCommand(CLI::App& root, int* exit_code);
 void AddDepthCommand(CLI::App& root, int* exit_code);
+void AddRunCommand(CLI::App& root, int* exit_code);
 
 }  // namespace lfrecon::cli

@@ -1,0 +1,263 @@
+#include "pipeline/embedded_pipeline.h"
+
+#include <spdlog/spdlog.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <fstream>
+#include <map>
+#include <set>
+
+#include "geometry/view_graph.h"
+#include "io/depth_map_io.h"
+#include "io/ply.h"
+#include "util/error.h"
+#include "util/memory.h"
+#include "util/progress.h"
+
+namespace lfrecon {
+namespace fs = std::filesystem;
+
+void PipelineOptions::Check() const {
+  depth.Check();
+  if (densify) propagation.Check();
+  if (voxel_size < 0) throw OptionError("voxel size must be positive");
+  if (voxel_size == 0 && voxel_divisions < 1) throw OptionError("voxel_divisions must be >= 1");
+  meshing.Check();
+  coloring.Check();
+  if (color_views < 0) throw OptionError("color_views must be >= 0");
+  if (!(dense_sigma_s > 0)) throw OptionError("dense_sigma_s must be positive");
+}
+
+double PipelineVoxelSize(const BoundingBox& volume, const PipelineOptions& options) {
+  if (options.voxel_size > 0) return options.voxel_size;
+  return volume.Extent().maxCoeff() / options.voxel_divisions;
+}
+
+EmbeddedPipeline::EmbeddedPipeline(std::vector<PinholeView> views, const BoundingBox& volume,
+                                   const PipelineOptions& options, std::vector<std::string> names)
+    : views_(std::move(views)), volume_(volume), options_(options), names_(std::move(names)) {
+  options_.Check();
+  if (!volume_.IsValid()) throw OptionError("the volume V is empty or not finite");
+  if (!names_.empty() && names_.size() != views_.size())
+    throw OptionError("pipeline: " + std::to_string(names_.size()) + " names for " + std::to_string(views_.size()) +
+                      " views");
+}
+
+namespace {
+
+std::string DefaultStem(int i) {
+  char buf[32];
+  std::snprintf(buf, sizeof(buf), "%05d", i);
+  return buf;
+}
+
+nlohmann::json BoxJson(const BoundingBox& b) {
+  return {{"min", {b.min.x(), b.min.y(), b.min.z()}}, {"max", {b.max.x(), b.max.y(), b.max.z()}}};
+}
+
+}  // namespace
+
+PipelineResult EmbeddedPipeline::Run(FrameSource& frames) {
+  Timer total;
+  const int n = static_cast<int>(views_.size());
+  if (frames.NumFrames() > 0 && frames.NumFrames() < n)
+    throw InputError("frames", std::to_string(frames.NumFrames()) + " frames for " + std::to_string(n) + " views");
+  std::vector<int> wanted = options_.views;
+  if (wanted.empty())
+    for (int i = 0; i < n; ++i) wanted.push_back(i);
+  std::sort(wanted.begin(), wanted.end());
+  wanted.erase(std::unique(wanted.begin(), wanted.end()), wanted.end());
+  for (int i : wanted)
+    if (i < 0 || i >= n) throw OptionError("view " + std::to_string(i) + " out of range [0, " + std::to_string(n) + ")");
+
+  PipelineResult result;
+  PipelineStats& st = result.stats;
+  FusionOptions fo = options_.fusion;
+  fo.volume = volume_;
+  fo.voxel_size = PipelineVoxelSize(volume_, options_);
+  if (options_.densify) fo.sigma_s = options_.dense_sigma_s;
+  fo.Check();
+  st.voxel_size = fo.voxel_size;
+  const Eigen::Vector3i gs = fo.GridSize();
+  ProbabilisticFusion fusion(fo);
+  spdlog::info("run: {} of {} views, V {:.3f} x {:.3f} x {:.3f} m, voxel {:.2f} mm ({} x {} x {}), {}", wanted.size(),
+               n, volume_.Extent().x(), volume_.Extent().y(), volume_.Extent().z(), 1000 * fo.voxel_size, gs.x(),
+               gs.y(), gs.z(), options_.densify ? "dense depth (§4)" : "filtered sparse depth (no densification)");
+
+  const bool write = !options_.out_dir.empty();
+  if (write) fs::create_directories(options_.out_dir);
+  if (write && options_.write_depth)
+    for (const char* sub : {"depth", "confidence"}) fs::create_directories(options_.out_dir / sub);
+
+  // The densification window: frame j is kept while a view that needs it
+  // (itself or a view within the photoconsistency angle) is still pending.
+  std::vector<int> refcount(n, 0);
+  ViewGraph photo_graph;
+  if (options_.densify) {
+    std::vector<Eigen::Vector3d> dirs;
+    for (const auto& v : views_) dirs.push_back(v.ViewingDirection());
+    photo_graph = ViewGraph(dirs, options_.propagation.photo.max_view_angle_deg);
+    for (int i : wanted) {
+      ++refcount[i];
+      for (int j : photo_graph.Neighbors(i)) ++refcount[j];
+    }
+  }
+  std::map<int, ViewImage> window;
+  // Frames kept for colouring: a few evenly spread over the processed views.
+  std::set<int> color_ids;
+  const int k = std::min<int>(options_.color_views, static_cast<int>(wanted.size()));
+  for (int c = 0; c < k; ++c) color_ids.insert(wanted[static_cast<std::size_t>(c) * wanted.size() / k]);
+  std::vector<ColorView> color_views;
+
+  StreamingDepth depth(views_, volume_, options_.depth);
+  depth.SetFrameTap([&](int f, const ViewImage& v) {
+    if (refcount[f] > 0) window[f] = v;  // shares the pixels with the depth stage's window
+    st.max_frames_held_pipeline = std::max(st.max_frames_held_pipeline, static_cast<int>(window.size()));
+    if (color_ids.count(f)) color_views.push_back({views_[f], v.image, cv::Mat()});
+  });
+
+  const DepthPropagator propagator(options_.propagation);
+  int done = 0;
+  const StreamingDepthStats ds = depth.Run(
+      frames, wanted, [&](int i, const cv::Mat& image, const DepthMap& sparse, const DepthMap& filtered) {
+        const DepthMap& base = options_.depth.run_filter ? filtered : sparse;
+        st.sparse_pixels += sparse.CountValid();
+        st.filtered_pixels += filtered.CountValid();
+        DepthMap fused_map;
+        if (options_.densify) {
+          Timer t;
+          std::vector<const ViewImage*> nbs;
+          for (int j : photo_graph.Neighbors(i)) {
+            const auto it = window.find(j);
+            if (it != window.end()) nbs.push_back(&it->second);
+          }
+          ViewImage fallback;
+          const auto ref = window.find(i);
+          if (ref == window.end()) {  // not expected: the tap precedes the sink
+            fallback.view = views_[i];
+            fallback.image = image;
+          }
+          fused_map = propagator.Run(ref != window.end() ? ref->second : fallback, nbs, base, volume_).dense;
+          st.seconds_densify += t.Seconds();
+          for (int j : photo_graph.Neighbors(i))
+            if (--refcount[j] == 0) window.erase(j);
+          if (--refcount[i] == 0) window.erase(i);
+        } else {
+          // TODO(propagation): without densification the filtered sparse maps are fused as they are.
+          fused_map = base;
+        }
+        st.fused_pixels += fused_map.CountValid();
+        Timer t;
+        fusion.Integrate(views_[i], fused_map, i);
+        st.seconds_fusion += t.Seconds();
+        if (write && options_.write_depth) {
+          const std::string stem = names_.empty() ? DefaultStem(i) : fs::path(names_[i]).stem().string();
+          WritePfm(options_.out_dir / "depth" / (stem + ".pfm"), fused_map.depth);
+          WritePfm(options_.out_dir / "confidence" / (stem + ".pfm"), fused_map.confidence);
+        }
+        ++done;
+        if (view_callback_) view_callback_(i, done, static_cast<int>(wanted.size()));
+      });
+  window.clear();
+  st.views = done;
+  st.frames_read = ds.frames_read;
+  st.max_frames_held_depth = ds.max_frames_held;
+  st.seconds_sparse = ds.seconds_sparse;
+  st.seconds_filter = ds.seconds_filter;
+  const FusionStats fs_stats = fusion.Stats();
+  st.active_voxels = fs_stats.active_voxels;
+  st.grid_bytes = fs_stats.grid_bytes;
+  spdlog::info("run: fused {} views ({:.1f} s depth, {:.1f} s densify, {:.1f} s fusion), {} active voxels",
+               done, ds.seconds_sparse + ds.seconds_filter, st.seconds_densify, st.seconds_fusion,
+               fs_stats.active_voxels);
+
+  Timer tm;
+  MeshingOptions mo = options_.meshing;
+  const double iso = mo.threshold < 0 ? fo.surface_threshold : mo.threshold;
+  fusion.ForEachVoxel([&](const Eigen::Vector3i&, double sum_log_p, int num_views) {
+    if (num_views > 0 && std::exp(sum_log_p / num_views) >= iso) ++st.voxels_above_threshold;
+  });
+  result.mesh_raw = fusion.ExtractMesh(mo);
+  st.seconds_mesh = tm.Seconds();
+  // TODO(carving): carving and Poisson go here; until then the final mesh is the fused one.
+  result.mesh = result.mesh_raw;
+  st.mesh_vertices = result.mesh.vertices.size();
+  st.mesh_triangles = result.mesh.triangles.size();
+  Timer tc;
+  st.color_frames = static_cast<int>(color_views.size());
+  if (!color_views.empty() && !result.mesh.triangles.empty())
+    ColorizeMesh(&result.mesh, color_views, options_.coloring);
+  color_views.clear();
+  st.seconds_color = tc.Seconds();
+  spdlog::info("run: {} of {} active voxels have H >= {}", st.voxels_above_threshold, st.active_voxels, iso);
+  spdlog::info("run: mesh {} vertices, {} triangles ({:.1f} s), coloured from {} frames ({:.1f} s)",
+               st.mesh_vertices, st.mesh_triangles, st.seconds_mesh, st.color_frames, st.seconds_color);
+
+  Timer tw;
+  if (write) {
+    WritePly(result.mesh, options_.out_dir / "mesh.ply");
+    WritePly(result.mesh_raw, options_.out_dir / "mesh_raw.ply");
+    if (options_.write_vdb) fusion.WriteVdb(options_.out_dir / "grid.vdb");
+  }
+  st.seconds_write = tw.Seconds();
+  st.seconds_total = total.Seconds();
+  st.peak_rss_bytes = PeakRssBytes();
+
+  const auto& po = options_.propagation;
+  result.report = {
+      {"views", {{"total", n}, {"processed", st.views}}},
+      {"volume", BoxJson(volume_)},
+      {"voxel_size", st.voxel_size},
+      {"grid_size", {gs.x(), gs.y(), gs.z()}},
+      {"seconds",
+       {{"depth_sparse", st.seconds_sparse},
+        {"depth_filter", st.seconds_filter},
+        {"densify", st.seconds_densify},
+        {"fusion", st.seconds_fusion},
+        {"mesh", st.seconds_mesh},
+        {"color", st.seconds_color},
+        {"write", st.seconds_write},
+        {"total", st.seconds_total}}},
+      {"peak_rss_bytes", st.peak_rss_bytes},
+      {"counts",
+       {{"frames_read", st.frames_read},
+        {"max_frames_held_depth", st.max_frames_held_depth},
+        {"max_frames_held_pipeline", st.max_frames_held_pipeline},
+        {"color_frames", st.color_frames},
+        {"sparse_pixels", st.sparse_pixels},
+        {"filtered_pixels", st.filtered_pixels},
+        {"fused_pixels", st.fused_pixels},
+        {"active_voxels", st.active_voxels},
+        {"voxels_above_threshold", st.voxels_above_threshold},
+        {"grid_bytes", st.grid_bytes},
+        {"mesh_vertices", st.mesh_vertices},
+        {"mesh_triangles", st.mesh_triangles}}},
+      {"options",
+       {{"densify", options_.densify},
+        {"run_filter", options_.depth.run_filter},
+        {"surface_threshold", mo.threshold < 0 ? fo.surface_threshold : mo.threshold},
+        {"sigma_v", fo.sigma_v},
+        {"sigma_s", fo.sigma_s},
+        {"band", fo.band},
+        {"free_space_margin", fo.free_space_margin},
+        {"color_views", options_.color_views},
+        {"propagation",
+         {{"sigma_p", po.photo.sigma_p},
+          {"max_view_angle_deg", po.photo.max_view_angle_deg},
+          {"silhouette_ratio", po.photo.silhouette_ratio},
+          {"dt_sigma_spatial", po.dt_sigma_spatial},
+          {"dt_sigma_color", po.dt_sigma_color}}},
+        {"carving", false},
+        {"poisson", false}}},
+  };
+  if (write) {
+    std::ofstream f(options_.out_dir / "report.json");
+    f << result.report.dump(2) << "\n";
+    if (!f) throw InputError((options_.out_dir / "report.json").string(), "cannot write");
+  }
+  return result;
+}
+
+}  // namespace lfrecon
