@@ -2,6 +2,8 @@
 
 #include <spdlog/spdlog.h>
 
+#include <opencv2/imgcodecs.hpp>
+
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
@@ -9,6 +11,7 @@
 #include <map>
 #include <set>
 
+#include "fusion/mesh_render.h"
 #include "geometry/view_graph.h"
 #include "io/depth_map_io.h"
 #include "io/ply.h"
@@ -200,6 +203,11 @@ PipelineResult EmbeddedPipeline::Run(FrameSource& frames) {
     WritePly(result.mesh, options_.out_dir / "mesh.ply");
     WritePly(result.mesh_raw, options_.out_dir / "mesh_raw.ply");
     if (options_.write_vdb) fusion.WriteVdb(options_.out_dir / "grid.vdb");
+    if (options_.write_turntable) {
+      const fs::path png = options_.out_dir / "mesh_turntable.png";
+      if (!cv::imwrite(png.string(), RenderTurntable(result.mesh, volume_)))
+        throw InputError(png.string(), "cannot write the turntable render");
+    }
   }
   st.seconds_write = tw.Seconds();
   st.seconds_total = total.Seconds();

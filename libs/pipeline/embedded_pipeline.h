@@ -52,11 +52,12 @@ struct PipelineOptions {
   ColoringOptions coloring;
   // Views to process (sequence indices); empty: all.
   std::vector<int> views;
-  // Where to write mesh.ply, mesh_raw.ply, grid.vdb, report.json (and depth/
+  // Where to write mesh.ply, mesh_raw.ply, grid.vdb, report.json, mesh_turntable.png (and depth/
   // when write_depth); empty: write nothing, only return the result.
   std::filesystem::path out_dir;
   bool write_depth = false;  // OUT/depth/<stem>.pfm and OUT/confidence/<stem>.pfm of the fused maps
   bool write_vdb = true;
+  bool write_turntable = true;  // OUT/mesh_turntable.png: four shaded views of the final mesh
 
   void Check() const;  // throws OptionError
 };

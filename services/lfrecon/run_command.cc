@@ -68,7 +68,7 @@ void AddRunCommand(CLI::App& root, int* exit_code) {
   auto* cmd = root.add_subcommand(
       "run", "The whole reconstruction in one process: depth (§3), densification (§4), fusion (§5), mesh");
   args->data.AddTo(cmd);
-  cmd->add_option("--out", args->out, "Output folder (mesh.ply, mesh_raw.ply, grid.vdb, report.json)")->required();
+  cmd->add_option("--out", args->out, "Output folder (mesh.ply, mesh_raw.ply, grid.vdb, report.json, mesh_turntable.png)")->required();
   cmd->add_option("--voxel-mm", args->voxel_mm, "Voxel edge in mm (default: the longest side of V / 256)");
   cmd->add_flag("--write-depth", args->write_depth, "Also write the fused per-view depth maps (depth/, confidence/ PFM)");
   cmd->add_option("--views", args->views, "Views to process, A:B:STEP (0-based, B exclusive); default all");

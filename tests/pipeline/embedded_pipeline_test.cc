@@ -125,7 +125,7 @@ TEST(EmbeddedPipeline, SphereLoopReachesFScoreAtTwoVoxels) {
   // Windows stay bounded: a few dozen frames, not the sequence.
   EXPECT_LT(st.max_frames_held_depth, frames / 2);
   EXPECT_LT(st.max_frames_held_pipeline, frames / 2);
-  for (const char* f : {"mesh.ply", "mesh_raw.ply", "grid.vdb", "report.json"}) EXPECT_TRUE(fs::exists(out / f)) << f;
+  for (const char* f : {"mesh.ply", "mesh_raw.ply", "grid.vdb", "report.json", "mesh_turntable.png"}) EXPECT_TRUE(fs::exists(out / f)) << f;
   std::ifstream rf(out / "report.json");
   const nlohmann::json report = nlohmann::json::parse(rf);
   EXPECT_EQ(report["views"]["processed"].get<int>(), frames);
