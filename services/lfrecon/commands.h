@@ -11,5 +11,7 @@ void AddSynthCommand(CLI::App& root, int* exit_code);
 void AddEvalCommand(CLI::App& root, int* exit_code);
 void AddDepthCommand(CLI::App& root, int* exit_code);
 void AddRunCommand(CLI::App& root, int* exit_code);
+// submit, status, export, cancel (service_commands.cc)
+void AddServiceCommands(CLI::App& root, int* exit_code);
 
 }  // namespace lfrecon::cli

@@ -28,6 +28,7 @@ int main(int argc, char** argv) {
   lfrecon::cli::AddEvalCommand(app, &exit_code);
   lfrecon::cli::AddDepthCommand(app, &exit_code);
   lfrecon::cli::AddRunCommand(app, &exit_code);
+  lfrecon::cli::AddServiceCommands(app, &exit_code);
 
   try {
     app.parse(argc, argv);

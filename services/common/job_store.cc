@@ -1,0 +1,294 @@
+#include "job_store.h"
+
+#include <unistd.h>
+
+#include <chrono>
+#include <cmath>
+#include <cstring>
+#include <fstream>
+#include <random>
+#include <sstream>
+
+#include "util/error.h"
+
+namespace lfrecon::svc {
+namespace fs = std::filesystem;
+
+namespace {
+
+std::string Stem(int index) {
+  char buf[32];
+  std::snprintf(buf, sizeof(buf), "%06d.pb", index);
+  return buf;
+}
+
+const char* KindDir(pb::MapKind kind) {
+  switch (kind) {
+    case pb::MAP_SPARSE: return "sparse";
+    case pb::MAP_FILTERED:
+    case pb::MAP_DENSE: return "dense";
+    default: throw std::invalid_argument("map kind " + std::to_string(static_cast<int>(kind)));
+  }
+}
+
+template <typename T>
+void ParseFile(const fs::path& path, T* msg) {
+  const std::string bytes = ReadFileBytes(path);
+  if (!msg->ParseFromString(bytes)) throw InputError(path.string(), "not a valid " + msg->GetTypeName() + " message");
+}
+
+}  // namespace
+
+void WriteFileAtomic(const fs::path& path, const std::string& bytes) {
+  fs::create_directories(path.parent_path());
+  static std::atomic<unsigned> counter{0};
+  const fs::path tmp = path.string() + ".tmp" + std::to_string(::getpid()) + "_" + std::to_string(counter++);
+  {
+    std::ofstream f(tmp, std::ios::binary);
+    f.write(bytes.data(), static_cast<std::streamsize>(bytes.size()));
+    if (!f) throw InputError(tmp.string(), "cannot write");
+  }
+  fs::rename(tmp, path);
+}
+
+std::string ReadFileBytes(const fs::path& path) {
+  std::ifstream f(path, std::ios::binary);
+  if (!f) throw InputError(path.string(), "cannot read");
+  std::ostringstream ss;
+  ss << f.rdbuf();
+  return ss.str();
+}
+
+JobStore::JobStore(fs::path root) : root_(std::move(root)) { fs::create_directories(root_); }
+
+bool JobStore::ValidJobId(const std::string& id) {
+  if (id.empty() || id.size() > 64) return false;
+  for (char c : id)
+    if (!(std::isalnum(static_cast<unsigned char>(c)) || c == '_' || c == '-')) return false;
+  return true;
+}
+
+fs::path JobStore::JobDir(const std::string& id) const {
+  if (!ValidJobId(id)) throw std::invalid_argument("invalid job id '" + id + "'");
+  return root_ / id;
+}
+
+bool JobStore::Exists(const std::string& id) const {
+  return ValidJobId(id) && fs::exists(root_ / id / "manifest.pb");
+}
+
+std::string JobStore::CreateJob() {
+  std::random_device rd;
+  std::mt19937_64 rng((static_cast<std::uint64_t>(rd()) << 32) ^ rd() ^ static_cast<std::uint64_t>(::getpid()));
+  const auto now = std::chrono::system_clock::to_time_t(std::chrono::system_clock::now());
+  char stamp[32];
+  std::strftime(stamp, sizeof(stamp), "%Y%m%d-%H%M%S", std::localtime(&now));
+  for (int attempt = 0; attempt < 100; ++attempt) {
+    char id[64];
+    std::snprintf(id, sizeof(id), "j%s-%06llx", stamp, static_cast<unsigned long long>(rng() & 0xffffff));
+    std::error_code ec;
+    if (fs::create_directory(root_ / id, ec)) return id;
+  }
+  throw std::runtime_error("cannot create a job folder under " + root_.string());
+}
+
+void JobStore::WriteManifest(const pb::JobManifest& manifest) const {
+  WriteFileAtomic(JobDir(manifest.job_id()) / "manifest.pb", manifest.SerializeAsString());
+}
+
+pb::JobManifest JobStore::ReadManifest(const std::string& id) const {
+  pb::JobManifest m;
+  ParseFile(JobDir(id) / "manifest.pb", &m);
+  return m;
+}
+
+fs::path JobStore::FramePath(const std::string& id, int index) const { return JobDir(id) / "frames" / Stem(index); }
+fs::path JobStore::MapPath(const std::string& id, pb::MapKind kind, int view) const {
+  return JobDir(id) / KindDir(kind) / Stem(view);
+}
+
+void JobStore::WriteFrame(const std::string& id, const pb::Frame& frame) const {
+  WriteFileAtomic(FramePath(id, static_cast<int>(frame.index())), frame.SerializeAsString());
+}
+
+cv::Mat JobStore::ReadFrame(const std::string& id, int index, const PinholeView& expect) const {
+  const fs::path path = FramePath(id, index);
+  pb::Frame f;
+  ParseFile(path, &f);
+  if (static_cast<int>(f.index()) != index) throw InputError(path.string(), "index", "holds frame " + std::to_string(f.index()));
+  return FrameFromProto(f, expect.width, expect.height, path.string());
+}
+
+void JobStore::WriteMap(const std::string& id, const pb::DepthMap& map) const {
+  WriteFileAtomic(MapPath(id, map.kind(), static_cast<int>(map.view())), map.SerializeAsString());
+}
+
+DepthMap JobStore::ReadMap(const std::string& id, pb::MapKind kind, int view, const PinholeView& expect) const {
+  const fs::path path = MapPath(id, kind, view);
+  pb::DepthMap m;
+  ParseFile(path, &m);
+  return DepthMapFromProto(m, expect.width, expect.height, path.string());
+}
+
+void JobStore::WriteText(const std::string& id, const std::string& name, const std::string& text) const {
+  WriteFileAtomic(JobDir(id) / name, text);
+}
+
+std::optional<std::string> JobStore::ReadText(const std::string& id, const std::string& name) const {
+  const fs::path p = JobDir(id) / name;
+  if (!fs::exists(p)) return std::nullopt;
+  return ReadFileBytes(p);
+}
+
+void JobStore::AppendLine(const std::string& id, const std::string& name, const std::string& line) const {
+  std::ofstream f(JobDir(id) / name, std::ios::app);
+  f << line << "\n";
+  f.flush();
+  if (!f) throw InputError((JobDir(id) / name).string(), "cannot append");
+}
+
+// ---- conversions ---------------------------------------------------------------------
+
+pb::Camera CameraToProto(const PinholeView& view, const std::string& name) {
+  pb::Camera c;
+  c.set_width(view.width);
+  c.set_height(view.height);
+  for (int r = 0; r < 3; ++r)
+    for (int k = 0; k < 3; ++k) {
+      c.add_k(view.K(r, k));
+      c.add_r(view.R(r, k));
+    }
+  for (int r = 0; r < 3; ++r) c.add_t(view.t(r));
+  c.set_name(name);
+  return c;
+}
+
+PinholeView CameraFromProto(const pb::Camera& c, const std::string& what) {
+  if (c.k_size() != 9 || c.r_size() != 9 || c.t_size() != 3)
+    throw InputError(what, "camera", "needs 9 K, 9 R and 3 t values");
+  if (c.width() == 0 || c.height() == 0 || c.width() > 65536 || c.height() > 65536)
+    throw InputError(what, "camera", "bad size " + std::to_string(c.width()) + "x" + std::to_string(c.height()));
+  PinholeView v;
+  v.width = static_cast<int>(c.width());
+  v.height = static_cast<int>(c.height());
+  for (int r = 0; r < 3; ++r) {
+    for (int k = 0; k < 3; ++k) {
+      v.K(r, k) = c.k(3 * r + k);
+      v.R(r, k) = c.r(3 * r + k);
+    }
+    v.t(r) = c.t(r);
+  }
+  if (!v.K.allFinite() || !v.R.allFinite() || !v.t.allFinite()) throw InputError(what, "camera", "non-finite value");
+  if (std::abs(v.K.determinant()) < 1e-12) throw InputError(what, "camera", "singular K");
+  v.K_inv = v.K.inverse();
+  return v;
+}
+
+pb::Box BoxToProto(const BoundingBox& box) {
+  pb::Box b;
+  for (int k = 0; k < 3; ++k) {
+    b.add_min(box.min(k));
+    b.add_max(box.max(k));
+  }
+  return b;
+}
+
+BoundingBox BoxFromProto(const pb::Box& b, const std::string& what) {
+  if (b.min_size() != 3 || b.max_size() != 3) throw InputError(what, "volume", "needs 3 min and 3 max values");
+  BoundingBox box;
+  box.min = Eigen::Vector3d(b.min(0), b.min(1), b.min(2));
+  box.max = Eigen::Vector3d(b.max(0), b.max(1), b.max(2));
+  if (!box.IsValid()) throw InputError(what, "volume", "empty or not finite");
+  return box;
+}
+
+pb::Frame FrameToProto(int index, const cv::Mat& image, const pb::Camera& camera) {
+  if (image.type() != CV_32FC3) throw std::invalid_argument("frame must be CV_32FC3");
+  pb::Frame f;
+  f.set_index(index);
+  *f.mutable_camera() = camera;
+  f.set_encoding("f32-bgr");
+  const cv::Mat c = image.isContinuous() ? image : image.clone();
+  f.set_data(c.data, c.total() * c.elemSize());
+  return f;
+}
+
+cv::Mat FrameFromProto(const pb::Frame& f, int width, int height, const std::string& what) {
+  if (f.encoding() != "f32-bgr") throw InputError(what, "encoding", "unknown frame encoding '" + f.encoding() + "'");
+  const std::size_t want = static_cast<std::size_t>(width) * height * 3 * sizeof(float);
+  if (f.data().size() != want)
+    throw InputError(what, "data", std::to_string(f.data().size()) + " bytes for a " + std::to_string(width) + "x" +
+                                       std::to_string(height) + " frame (" + std::to_string(want) + " expected)");
+  cv::Mat image(height, width, CV_32FC3);
+  std::memcpy(image.data, f.data().data(), want);
+  return image;
+}
+
+pb::DepthMap DepthMapToProto(const DepthMap& map, int view, pb::MapKind kind) {
+  pb::DepthMap m;
+  m.set_view(view);
+  m.set_kind(kind);
+  m.set_width(map.depth.cols);
+  m.set_height(map.depth.rows);
+  auto put = [](const cv::Mat& mat, int type, std::string* out) {
+    if (mat.empty()) return;
+    if (mat.type() != type) throw std::invalid_argument("depth map channel of unexpected type");
+    const cv::Mat c = mat.isContinuous() ? mat : mat.clone();
+    out->assign(reinterpret_cast<const char*>(c.data), c.total() * c.elemSize());
+  };
+  put(map.depth, CV_32F, m.mutable_depth());
+  put(map.confidence, CV_32F, m.mutable_confidence());
+  put(map.label, CV_8U, m.mutable_label());
+  return m;
+}
+
+DepthMap DepthMapFromProto(const pb::DepthMap& m, int width, int height, const std::string& what) {
+  if (static_cast<int>(m.width()) != width || static_cast<int>(m.height()) != height)
+    throw InputError(what, "size", "depth map is " + std::to_string(m.width()) + "x" + std::to_string(m.height()) +
+                                       ", its view " + std::to_string(width) + "x" + std::to_string(height));
+  const std::size_t n = static_cast<std::size_t>(width) * height;
+  auto get = [&](const std::string& bytes, int type, std::size_t elem, const char* field) {
+    if (bytes.empty()) return cv::Mat();
+    if (bytes.size() != n * elem) throw InputError(what, field, std::to_string(bytes.size()) + " bytes, " +
+                                                                    std::to_string(n * elem) + " expected");
+    cv::Mat mat(height, width, type);
+    std::memcpy(mat.data, bytes.data(), bytes.size());
+    return mat;
+  };
+  DepthMap d;
+  d.depth = get(m.depth(), CV_32F, 4, "depth");
+  if (d.depth.empty()) throw InputError(what, "depth", "missing");
+  d.confidence = get(m.confidence(), CV_32F, 4, "confidence");
+  d.label = get(m.label(), CV_8U, 1, "label");
+  if (cv::checkRange(d.depth, true) == false) throw InputError(what, "depth", "non-finite values");
+  if (!d.confidence.empty() && !cv::checkRange(d.confidence, true)) throw InputError(what, "confidence", "non-finite values");
+  return d;
+}
+
+PipelineOptions JobPipelineOptions(const pb::JobOptions& o) {
+  PipelineOptions options;
+  options.voxel_size = o.voxel_size();
+  options.densify = !o.no_densify();
+  if (o.has_color_views()) options.color_views = o.color_views();
+  if (o.sigma_s() < 0) throw OptionError("sigma_s must be positive");
+  if (o.sigma_s() > 0) (options.densify ? options.dense_sigma_s : options.fusion.sigma_s) = o.sigma_s();
+  options.Check();
+  return options;
+}
+
+JobGeometry LoadJobGeometry(const JobStore& store, const std::string& id) {
+  const pb::JobManifest m = store.ReadManifest(id);
+  const std::string what = (store.JobDir(id) / "manifest.pb").string();
+  JobGeometry g;
+  g.id = id;
+  for (const auto& c : m.views()) {
+    g.views.push_back(CameraFromProto(c, what));
+    g.names.push_back(c.name());
+  }
+  if (g.views.empty()) throw InputError(what, "views", "no views");
+  g.volume = BoxFromProto(m.volume(), what);
+  g.options = JobPipelineOptions(m.spec().options());
+  return g;
+}
+
+}  // namespace lfrecon::svc

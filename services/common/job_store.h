@@ -1,0 +1,95 @@
+#pragma once
+// The job store: one folder per job under a root that every daemon of a stack
+// can read (one host, or a shared volume). It is the durable state of a job, so
+// any daemon can restart and resume from it:
+//   JOB/manifest.pb          JobManifest (cameras, V, options), written by ingest
+//   JOB/frames/NNNNNN.pb     Frame: the undistorted frame, lossless (ingest)
+//   JOB/ingest.done          frame count, when ingest has spooled every frame
+//   JOB/sparse/NNNNNN.pb     DepthMap, sparse (§3.1) (aggregator, from depth workers)
+//   JOB/dense/NNNNNN.pb      DepthMap, dense (§4) or filtered (aggregator, from propagate workers)
+//   JOB/fused.log            view ids in the order they were fused (the fusion checkpoint)
+//   JOB/status.pb            JobStatus once the job has ended (done, failed, cancelled)
+//   JOB/cancelled            marker: ingest stops spooling
+//   JOB/mesh.ply, mesh_raw.ply, grid.vdb   final outputs
+// Every file is written to a temporary name and renamed, so a reader (or a
+// restart after kill -9) never sees half a file.
+#include <filesystem>
+#include <optional>
+#include <string>
+
+#include "depth/depth_map.h"
+#include "geometry/pinhole_view.h"
+#include "geometry/triangle_mesh.h"
+#include "lfrecon_service.pb.h"
+#include "pipeline/embedded_pipeline.h"
+
+namespace lfrecon::svc {
+
+namespace pb = ::lfrecon::v1;
+
+class JobStore {
+ public:
+  explicit JobStore(std::filesystem::path root);
+  const std::filesystem::path& root() const { return root_; }
+
+  // A new unique id ("j" + time + random hex); creates its folder.
+  std::string CreateJob();
+  // Ids are [A-Za-z0-9_-], 1..64 characters (never a path); false otherwise.
+  static bool ValidJobId(const std::string& id);
+  bool Exists(const std::string& id) const;
+  std::filesystem::path JobDir(const std::string& id) const;  // throws std::invalid_argument for an invalid id
+
+  void WriteManifest(const pb::JobManifest& manifest) const;
+  pb::JobManifest ReadManifest(const std::string& id) const;  // throws InputError naming the file
+
+  std::filesystem::path FramePath(const std::string& id, int index) const;
+  std::filesystem::path MapPath(const std::string& id, pb::MapKind kind, int view) const;
+  bool HasFrame(const std::string& id, int index) const { return std::filesystem::exists(FramePath(id, index)); }
+  bool HasMap(const std::string& id, pb::MapKind kind, int view) const {
+    return std::filesystem::exists(MapPath(id, kind, view));
+  }
+  void WriteFrame(const std::string& id, const pb::Frame& frame) const;
+  // CV_32FC3 BGR in [0, 1]; checked against the manifest camera's size.
+  cv::Mat ReadFrame(const std::string& id, int index, const PinholeView& expect) const;
+  void WriteMap(const std::string& id, const pb::DepthMap& map) const;
+  DepthMap ReadMap(const std::string& id, pb::MapKind kind, int view, const PinholeView& expect) const;
+
+  // Small marker/state files.
+  void WriteText(const std::string& id, const std::string& name, const std::string& text) const;
+  std::optional<std::string> ReadText(const std::string& id, const std::string& name) const;
+  void AppendLine(const std::string& id, const std::string& name, const std::string& line) const;
+
+ private:
+  std::filesystem::path root_;
+};
+
+// Writes `bytes` to `path` atomically (temporary file + rename).
+void WriteFileAtomic(const std::filesystem::path& path, const std::string& bytes);
+std::string ReadFileBytes(const std::filesystem::path& path);  // throws InputError
+
+// Conversions between the messages and the library types (all validate sizes
+// and finiteness and throw InputError with `what` naming the source).
+pb::Camera CameraToProto(const PinholeView& view, const std::string& name);
+PinholeView CameraFromProto(const pb::Camera& camera, const std::string& what);
+pb::Box BoxToProto(const BoundingBox& box);
+BoundingBox BoxFromProto(const pb::Box& box, const std::string& what);
+pb::Frame FrameToProto(int index, const cv::Mat& image, const pb::Camera& camera);
+cv::Mat FrameFromProto(const pb::Frame& frame, int width, int height, const std::string& what);
+pb::DepthMap DepthMapToProto(const DepthMap& map, int view, pb::MapKind kind);
+DepthMap DepthMapFromProto(const pb::DepthMap& map, int width, int height, const std::string& what);
+
+// The embedded pipeline's options for a job: PipelineOptions defaults with the
+// job's overrides, exactly as `lfrecon run` maps its flags.
+PipelineOptions JobPipelineOptions(const pb::JobOptions& options);
+
+// A job as a worker or the aggregator sees it: the manifest decoded.
+struct JobGeometry {
+  std::string id;
+  std::vector<PinholeView> views;
+  std::vector<std::string> names;
+  BoundingBox volume;
+  PipelineOptions options;
+};
+JobGeometry LoadJobGeometry(const JobStore& store, const std::string& id);
+
+}  // namespace lfrecon::svc

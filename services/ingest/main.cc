@@ -1,0 +1,186 @@
+// lfrecon-ingest: accepts jobs (SubmitJob), reads their video or images and
+// poses (io/Dataset: COLMAP or transforms.json, validation, undistortion),
+// writes the job manifest and spools every undistorted frame to the job store,
+// announcing each to the aggregator (FrameSpooled), then IngestDone (or
+// IngestFailed with the message that names the bad file). One thread per job;
+// a cancelled job stops at its next frame.
+#include <spdlog/spdlog.h>
+
+#include <CLI/CLI.hpp>
+#include <iostream>
+#include <list>
+#include <thread>
+
+#include "common/job_store.h"
+#include "common/messaging.h"
+#include "io/dataset.h"
+#include "util/error.h"
+#include "util/logging.h"
+#include "util/progress.h"
+
+namespace lfrecon::svc {
+namespace {
+
+struct IngestOptions {
+  std::string endpoint = kDefaultIngestEndpoint;
+  std::string aggregate = kDefaultAggregateEndpoint;
+  std::filesystem::path store;
+  std::int64_t max_message_bytes = kDefaultMaxMessageBytes;
+};
+
+DatasetOptions ToDatasetOptions(const pb::JobSpec& spec) {
+  DatasetOptions d;
+  d.dataset_dir = spec.dataset_dir();
+  d.images_dir = spec.images_dir();
+  d.video_path = spec.video_path();
+  d.colmap_dir = spec.colmap_dir();
+  d.transforms_path = spec.transforms_path();
+  if (spec.bbox_size() != 0) {
+    if (spec.bbox_size() != 6) throw OptionError("bbox needs 6 numbers, got " + std::to_string(spec.bbox_size()));
+    BoundingBox b;
+    b.min = Eigen::Vector3d(spec.bbox(0), spec.bbox(1), spec.bbox(2));
+    b.max = Eigen::Vector3d(spec.bbox(3), spec.bbox(4), spec.bbox(5));
+    if (!b.IsValid()) throw OptionError("bbox: each max must be greater than its min");
+    d.bbox = b;
+  }
+  d.Check();
+  return d;
+}
+
+// Sends `env` to the aggregator until it answers (or the daemon stops / the job is cancelled).
+bool Notify(RequestClient& client, const pb::Envelope& env, const JobStore& store, const std::string& id) {
+  while (!StopRequested()) {
+    auto reply = client.Request(env, std::chrono::milliseconds(2000));
+    if (reply) {
+      if (reply->has_error())
+        spdlog::warn("ingest: job {}: aggregator refused {}: {}", id, BodyName(env), reply->error().message());
+      return true;
+    }
+    if (store.ReadText(id, "cancelled")) return false;
+    spdlog::warn("ingest: job {}: aggregator {} not answering; retrying", id, client.endpoint());
+  }
+  return false;
+}
+
+void Spool(zmq::context_t& context, const IngestOptions& o, const JobStore& store, const std::string& id,
+           std::shared_ptr<Dataset> ds) {
+  RequestClient agg(context, o.aggregate, o.max_message_bytes);
+  int spooled = 0;
+  try {
+    auto frames = ds->OpenFrames();
+    Frame frame;
+    Timer timer;
+    for (int k = 0; k < ds->NumViews(); ++k) {
+      if (StopRequested()) return;
+      if (store.ReadText(id, "cancelled")) {
+        spdlog::info("ingest: job {} cancelled after {} frames", id, spooled);
+        return;
+      }
+      if (!frames->Next(&frame)) break;
+      store.WriteFrame(id, FrameToProto(k, frame.image, CameraToProto(ds->View(k), ds->views()[k].name)));
+      ++spooled;
+      pb::Envelope env = NewEnvelope(id);
+      env.mutable_frame_spooled()->set_index(k);
+      if (!Notify(agg, env, store, id)) return;
+    }
+    store.WriteText(id, "ingest.done", std::to_string(spooled));
+    pb::Envelope env = NewEnvelope(id);
+    env.mutable_ingest_done()->set_num_frames(spooled);
+    Notify(agg, env, store, id);
+    spdlog::info("ingest: job {}: {} frames spooled in {:.1f} s", id, spooled, timer.Seconds());
+  } catch (const std::exception& e) {
+    spdlog::error("ingest: job {}: {}", id, e.what());
+    pb::Envelope env = NewEnvelope(id);
+    env.mutable_ingest_failed()->set_message(e.what());
+    Notify(agg, env, store, id);
+  }
+}
+
+int Serve(const IngestOptions& o) {
+  zmq::context_t context(1);
+  JobStore store(o.store);
+  RouterServer server(context, o.endpoint, o.max_message_bytes);
+  RequestClient agg(context, o.aggregate, o.max_message_bytes);
+  std::list<std::thread> spoolers;
+  spdlog::info("ingest: serving on {} (store {}, aggregator {})", o.endpoint, store.root().string(), o.aggregate);
+  while (!StopRequested()) {
+    auto in = server.Receive(std::chrono::milliseconds(200));
+    if (!in) continue;
+    pb::Envelope reply;
+    if (!in->ok) {
+      spdlog::warn("ingest: refused a message of {} bytes: {}", in->bytes, in->error.message());
+      reply = NewEnvelope();
+      *reply.mutable_error() = in->error;
+    } else if (in->envelope.has_ping()) {
+      reply = NewEnvelope();
+      reply.mutable_pong()->set_daemon("lfrecon-ingest");
+    } else if (in->envelope.has_submit()) {
+      const pb::JobSpec& spec = in->envelope.submit().spec();
+      try {
+        auto ds = std::make_shared<Dataset>(Dataset::Open(ToDatasetOptions(spec)));
+        JobPipelineOptions(spec.options());  // validates the options before accepting the job
+        const std::string id = store.CreateJob();
+        pb::JobManifest m;
+        m.set_job_id(id);
+        *m.mutable_spec() = spec;
+        for (int i = 0; i < ds->NumViews(); ++i) *m.add_views() = CameraToProto(ds->View(i), ds->views()[i].name);
+        *m.mutable_volume() = BoxToProto(ds->bbox());
+        m.set_pose_source(ds->pose_source());
+        m.set_bbox_source(ds->bbox_source());
+        store.WriteManifest(m);
+        pb::Envelope created = NewEnvelope(id);
+        created.mutable_job_created()->set_num_views(ds->NumViews());
+        if (!agg.Request(created, std::chrono::milliseconds(5000)))
+          spdlog::warn("ingest: aggregator {} did not answer; it will find job {} in the store", o.aggregate, id);
+        spoolers.emplace_back(Spool, std::ref(context), std::cref(o), std::cref(store), id, ds);
+        spdlog::info("ingest: job {}: {} views ({}, V from {})", id, ds->NumViews(), ds->pose_source(), ds->bbox_source());
+        reply = NewEnvelope(id);
+        reply.mutable_submit_reply()->set_job_id(id);
+        reply.mutable_submit_reply()->set_num_views(ds->NumViews());
+      } catch (const InputError& e) {
+        reply = ErrorEnvelope(pb::ERROR_INPUT, e.what());
+      } catch (const OptionError& e) {
+        reply = ErrorEnvelope(pb::ERROR_BAD_REQUEST, e.what());
+      } catch (const std::exception& e) {
+        reply = ErrorEnvelope(pb::ERROR_INTERNAL, e.what());
+      }
+    } else {
+      reply = ErrorEnvelope(pb::ERROR_BAD_REQUEST, "lfrecon-ingest does not serve '" + BodyName(in->envelope) + "'",
+                            in->envelope.job_id());
+    }
+    server.Reply(*in, reply);
+  }
+  for (auto& t : spoolers) t.join();
+  spdlog::info("ingest: stopped");
+  return 0;
+}
+
+}  // namespace
+}  // namespace lfrecon::svc
+
+int main(int argc, char** argv) {
+  using namespace lfrecon::svc;
+  CLI::App app{"lfrecon-ingest: reads, validates, undistorts and spools the frames of submitted jobs"};
+  IngestOptions o;
+  o.endpoint = EndpointFromEnv("LFRECON_INGEST", kDefaultIngestEndpoint);
+  o.aggregate = EndpointFromEnv("LFRECON_AGGREGATE", kDefaultAggregateEndpoint);
+  std::string store;
+  double max_mb = kDefaultMaxMessageBytes / 1048576.0;
+  int verbosity = 0;
+  app.add_option("--bind", o.endpoint, "ZeroMQ endpoint to bind (default: $LFRECON_INGEST or loopback)")->capture_default_str();
+  app.add_option("--aggregate", o.aggregate, "The aggregator's endpoint")->capture_default_str();
+  app.add_option("--store", store, "Job store folder")->required();
+  app.add_option("--max-message-mb", max_mb, "Largest message accepted or sent, MiB")->capture_default_str();
+  app.add_flag("-v,--verbose", verbosity, "More logging");
+  CLI11_PARSE(app, argc, argv);
+  lfrecon::SetupLogging(verbosity);
+  o.store = store;
+  o.max_message_bytes = static_cast<std::int64_t>(max_mb * 1048576.0);
+  try {
+    InstallStopHandlers();
+    return Serve(o);
+  } catch (const std::exception& e) {
+    std::cerr << "lfrecon-ingest: error: " << e.what() << "\n";
+    return 1;
+  }
+}

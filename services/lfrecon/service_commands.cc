@@ -1,0 +1,216 @@
+// Client commands of the streaming service: `lfrecon submit` (to lfrecon-ingest),
+// `lfrecon status`, `lfrecon export`, `lfrecon cancel` (to lfrecon-aggregate).
+#include <spdlog/spdlog.h>
+
+#include <filesystem>
+#include <fstream>
+#include <iostream>
+#include <nlohmann/json.hpp>
+#include <thread>
+
+#include "commands.h"
+#include "common/messaging.h"
+#include "dataset_flags.h"
+#include "util/error.h"
+
+namespace lfrecon::cli {
+namespace fs = std::filesystem;
+namespace pb = ::lfrecon::v1;
+
+namespace {
+
+struct Endpoints {
+  std::string ingest = svc::EndpointFromEnv("LFRECON_INGEST", svc::kDefaultIngestEndpoint);
+  std::string aggregate = svc::EndpointFromEnv("LFRECON_AGGREGATE", svc::kDefaultAggregateEndpoint);
+  int timeout_ms = 30000;
+};
+
+// Turns an error reply into the CLI's errors (exit 1 for input/job problems, 2 for usage).
+[[noreturn]] void Rethrow(const svc::ServiceError& e, const std::string& endpoint) {
+  switch (e.code()) {
+    case pb::ERROR_BAD_REQUEST: throw OptionError(e.what());
+    case pb::ERROR_UNKNOWN: throw InputError(endpoint, e.what());
+    default: throw InputError(endpoint, std::string(pb::ErrorCode_Name(e.code())) + ": " + e.what());
+  }
+}
+
+pb::Envelope Call(const std::string& endpoint, const pb::Envelope& req, int timeout_ms) {
+  zmq::context_t context(1);
+  svc::RequestClient client(context, endpoint);
+  try {
+    return client.Call(req, std::chrono::milliseconds(timeout_ms));
+  } catch (const svc::ServiceError& e) {
+    Rethrow(e, endpoint);
+  }
+}
+
+void AddEndpointFlags(CLI::App* cmd, Endpoints* e, bool ingest) {
+  if (ingest) cmd->add_option("--ingest", e->ingest, "lfrecon-ingest endpoint (default $LFRECON_INGEST or loopback)");
+  cmd->add_option("--aggregate", e->aggregate, "lfrecon-aggregate endpoint (default $LFRECON_AGGREGATE or loopback)");
+  cmd->add_option("--timeout-ms", e->timeout_ms, "How long to wait for a reply")->capture_default_str();
+}
+
+std::string Abs(const fs::path& p) { return p.empty() ? std::string() : fs::absolute(p).lexically_normal().string(); }
+
+nlohmann::json StatusJson(const std::string& job, const pb::JobStatus& s) {
+  return {{"job", job},
+          {"state", pb::JobState_Name(s.state()).substr(6)},
+          {"views", s.num_views()},
+          {"frames_spooled", s.frames_spooled()},
+          {"sparse_done", s.sparse_done()},
+          {"dense_done", s.dense_done()},
+          {"views_fused", s.views_fused()},
+          {"leases_expired", s.leases_expired()},
+          {"active_voxels", s.active_voxels()},
+          {"triangles", s.triangles()},
+          {"seconds", s.seconds()},
+          {"message", s.message()}};
+}
+
+bool Ended(pb::JobState s) { return s == pb::STATE_DONE || s == pb::STATE_FAILED || s == pb::STATE_CANCELLED; }
+
+pb::JobStatus GetStatus(const Endpoints& e, const std::string& job) {
+  pb::Envelope req = svc::NewEnvelope(job);
+  req.mutable_status();
+  return Call(e.aggregate, req, e.timeout_ms).job_status();
+}
+
+// Polls until the job ends (or `timeout_s` passes); prints progress to stderr.
+pb::JobStatus WaitFor(const Endpoints& e, const std::string& job, double timeout_s) {
+  const auto start = std::chrono::steady_clock::now();
+  while (true) {
+    const pb::JobStatus s = GetStatus(e, job);
+    if (Ended(s.state())) return s;
+    if (std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count() > timeout_s)
+      throw InputError(job, "still " + pb::JobState_Name(s.state()) + " after " + std::to_string(timeout_s) + " s");
+    spdlog::debug("{}: {} frames, {} sparse, {} fused of {}", job, s.frames_spooled(), s.sparse_done(),
+                  s.views_fused(), s.num_views());
+    std::this_thread::sleep_for(std::chrono::milliseconds(200));
+  }
+}
+
+int PrintStatus(const std::string& job, const pb::JobStatus& s, bool json) {
+  if (json) {
+    std::cout << StatusJson(job, s).dump(2) << "\n";
+  } else {
+    std::cout << job << ": " << pb::JobState_Name(s.state()).substr(6) << ", " << s.views_fused() << "/"
+              << s.num_views() << " views fused (" << s.frames_spooled() << " frames spooled, " << s.sparse_done()
+              << " sparse, " << s.dense_done() << " dense), " << s.seconds() << " s";
+    if (s.leases_expired()) std::cout << ", " << s.leases_expired() << " tasks re-issued";
+    if (!s.message().empty()) std::cout << ": " << s.message();
+    std::cout << "\n";
+  }
+  return s.state() == pb::STATE_FAILED ? 1 : 0;
+}
+
+}  // namespace
+
+void AddServiceCommands(CLI::App& root, int* exit_code) {
+  {
+    struct Args {
+      DatasetFlags data;
+      Endpoints ep;
+      double voxel_mm = 0, sigma_s = 0;
+      bool no_densify = false, wait = false;
+      int color_views = 8;
+      double wait_s = 3600;
+    };
+    auto a = std::make_shared<Args>();
+    auto* cmd = root.add_subcommand("submit", "Submit a job to the streaming service; prints its id");
+    a->data.AddTo(cmd);
+    AddEndpointFlags(cmd, &a->ep, true);
+    cmd->add_option("--voxel-mm", a->voxel_mm, "Voxel edge in mm (default: the longest side of V / 256)");
+    cmd->add_option("--sigma-s", a->sigma_s, "σ_s of the fusion (as lfrecon run)");
+    cmd->add_flag("--no-densify", a->no_densify, "Fuse the filtered sparse maps (as lfrecon run)");
+    cmd->add_option("--color-views", a->color_views, "Frames used to colour the mesh (0: none)")->capture_default_str();
+    cmd->add_flag("--wait", a->wait, "Wait until the job ends and print its status");
+    cmd->add_option("--wait-s", a->wait_s, "With --wait: give up after this many seconds")->capture_default_str();
+    cmd->callback([a, exit_code] {
+      if (a->voxel_mm < 0 || a->sigma_s < 0) throw OptionError("--voxel-mm and --sigma-s must be positive");
+      const DatasetOptions d = a->data.Resolve();
+      pb::Envelope req = svc::NewEnvelope();
+      pb::JobSpec* spec = req.mutable_submit()->mutable_spec();
+      spec->set_dataset_dir(Abs(d.dataset_dir));
+      spec->set_images_dir(Abs(d.images_dir));
+      spec->set_video_path(Abs(d.video_path));
+      spec->set_colmap_dir(Abs(d.colmap_dir));
+      spec->set_transforms_path(Abs(d.transforms_path));
+      for (double v : a->data.bbox) spec->add_bbox(v);
+      spec->mutable_options()->set_voxel_size(a->voxel_mm / 1000.0);
+      spec->mutable_options()->set_sigma_s(a->sigma_s);
+      spec->mutable_options()->set_no_densify(a->no_densify);
+      spec->mutable_options()->set_color_views(a->color_views);
+      const pb::Envelope reply = Call(a->ep.ingest, req, a->ep.timeout_ms);
+      const std::string job = reply.submit_reply().job_id();
+      std::cout << job << "\n" << std::flush;
+      spdlog::info("submitted {} ({} views)", job, reply.submit_reply().num_views());
+      *exit_code = a->wait ? PrintStatus(job, WaitFor(a->ep, job, a->wait_s), false) : 0;
+    });
+  }
+  {
+    struct Args {
+      std::string job;
+      Endpoints ep;
+      bool wait = false, json = false;
+      double wait_s = 3600;
+    };
+    auto a = std::make_shared<Args>();
+    auto* cmd = root.add_subcommand("status", "State and progress of a service job");
+    cmd->add_option("job", a->job, "Job id (from lfrecon submit)")->required();
+    AddEndpointFlags(cmd, &a->ep, false);
+    cmd->add_flag("--wait", a->wait, "Wait until the job ends");
+    cmd->add_option("--wait-s", a->wait_s, "With --wait: give up after this many seconds")->capture_default_str();
+    cmd->add_flag("--json", a->json, "JSON output");
+    cmd->callback([a, exit_code] {
+      const pb::JobStatus s = a->wait ? WaitFor(a->ep, a->job, a->wait_s) : GetStatus(a->ep, a->job);
+      *exit_code = PrintStatus(a->job, s, a->json);
+    });
+  }
+  {
+    struct Args {
+      std::string job;
+      fs::path out;
+      Endpoints ep;
+      bool refine = false;
+    };
+    auto a = std::make_shared<Args>();
+    auto* cmd = root.add_subcommand("export", "Mesh of a service job (what is fused so far while it runs)");
+    cmd->add_option("job", a->job, "Job id")->required();
+    cmd->add_option("-o,--out", a->out, "Output PLY")->required();
+    cmd->add_flag("--refine", a->refine, "Voxel carving + screened Poisson (not implemented yet in the service)");
+    AddEndpointFlags(cmd, &a->ep, false);
+    cmd->callback([a, exit_code] {
+      pb::Envelope req = svc::NewEnvelope(a->job);
+      req.mutable_export_request()->set_refine(a->refine);
+      const pb::Envelope reply = Call(a->ep.aggregate, req, std::max(a->ep.timeout_ms, 120000));
+      const pb::ExportReply& r = reply.export_reply();
+      if (!a->out.parent_path().empty()) fs::create_directories(a->out.parent_path());
+      std::ofstream f(a->out, std::ios::binary);
+      f.write(r.ply().data(), static_cast<std::streamsize>(r.ply().size()));
+      if (!f) throw InputError(a->out.string(), "cannot write");
+      std::cout << "wrote " << a->out.string() << " (" << r.vertices() << " vertices, " << r.triangles()
+                << " triangles) from " << r.views_fused() << " fused views" << (r.complete() ? "" : " (job still running)")
+                << "\n";
+      *exit_code = 0;
+    });
+  }
+  {
+    struct Args {
+      std::string job;
+      Endpoints ep;
+    };
+    auto a = std::make_shared<Args>();
+    auto* cmd = root.add_subcommand("cancel", "Cancel a service job");
+    cmd->add_option("job", a->job, "Job id")->required();
+    AddEndpointFlags(cmd, &a->ep, false);
+    cmd->callback([a, exit_code] {
+      pb::Envelope req = svc::NewEnvelope(a->job);
+      req.mutable_cancel();
+      Call(a->ep.aggregate, req, a->ep.timeout_ms);
+      std::cout << a->job << ": cancelled\n";
+      *exit_code = 0;
+    });
+  }
+}
+
+}  // namespace lfrecon::cli
