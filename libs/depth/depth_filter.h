@@ -52,6 +52,8 @@ class VoteGrid {
   DepthMap Filter(const DepthMap& map, const PinholeView& view) const;
 
  private:
+  // Interpolated votes at grid coordinates (voxel k's centre at k).
+  float VotesAtGrid(const Eigen::Vector3d& g) const;
   std::int64_t Index(int x, int y, int z) const {
     return (static_cast<std::int64_t>(z) * dims_.y() + y) * dims_.x() + x;
   }
