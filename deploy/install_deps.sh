@@ -14,6 +14,7 @@ PACKAGES=(
   nlohmann-json3-dev
   libopenvdb-dev libboost-iostreams-dev libopenexr-dev
   libgtest-dev libgmock-dev libbenchmark-dev
+  libopen3d-dev
   libzmq3-dev cppzmq-dev protobuf-compiler libprotobuf-dev
 )
 

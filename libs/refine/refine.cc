@@ -1,0 +1,61 @@
+#include "refine/refine.h"
+
+#include <spdlog/spdlog.h>
+
+#include "util/error.h"
+#include "util/progress.h"
+
+namespace lfrecon {
+
+void RefineOptions::Check() const {
+  carving.Check();
+  poisson.Check();
+  LFRECON_CHECK_OPTION(max_views >= 0);
+}
+
+RefineResult RefineFusedSurface(const ProbabilisticFusion& fusion, const std::vector<ColorView>& views,
+                                const RefineOptions& options, const MeshingOptions& meshing) {
+  options.Check();
+  meshing.Check();
+  Timer total;
+  RefineResult result;
+  RefineStats& st = result.stats;
+  const double threshold = meshing.threshold < 0 ? fusion.options().surface_threshold : meshing.threshold;
+
+  Timer tg;
+  VoxelGrid grid = VoxelGrid::FromFusion(fusion, threshold, meshing.min_views);
+  st.occupied_voxels = grid.CountOccupied();
+  st.seconds_grid = tg.Seconds();
+
+  if (options.carve && !views.empty()) {
+    std::vector<ColorView> used;
+    const std::size_t k = options.max_views > 0 ? std::min<std::size_t>(options.max_views, views.size()) : views.size();
+    for (std::size_t c = 0; c < k; ++c) used.push_back(views[c * views.size() / k]);
+    st.carving_views = static_cast<int>(used.size());
+    Timer tc;
+    const CarvingResult cr = VoxelCarving(&grid, used, options.carving);
+    st.seconds_carving = tc.Seconds();
+    st.region_voxels = cr.region_voxels;
+    for (const CarvingRound& r : cr.rounds) st.carved_per_round.push_back(r.carved);
+    st.carved = cr.TotalCarved();
+  }
+
+  Timer tp;
+  const OrientedPoints points = BoundaryPoints(grid);
+  PoissonStats ps;
+  BoundingBox v = fusion.options().volume;
+  result.mesh = ScreenedPoissonSurface(points, grid.voxel_size(), options.poisson, v, &ps);
+  st.seconds_poisson = tp.Seconds();
+  st.poisson_points = ps.points;
+  st.poisson_depth = ps.depth;
+  st.mesh_vertices = result.mesh.vertices.size();
+  st.mesh_triangles = result.mesh.triangles.size();
+  st.seconds_total = total.Seconds();
+  spdlog::info("refine: {} occupied voxels, |R| {}, {} carved from {} views; Poisson of {} points (depth {}): {} "
+               "triangles; {:.1f} s ({:.1f} grid, {:.1f} carving, {:.1f} Poisson)",
+               st.occupied_voxels, st.region_voxels, st.carved, st.carving_views, st.poisson_points, st.poisson_depth,
+               st.mesh_triangles, st.seconds_total, st.seconds_grid, st.seconds_carving, st.seconds_poisson);
+  return result;
+}
+
+}  // namespace lfrecon
