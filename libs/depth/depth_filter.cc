@@ -103,12 +103,12 @@ float VoteGrid::VotesAt(const Eigen::Vector3d& world) const {
 }
 
 float VoteGrid::VotesAtGrid(const Eigen::Vector3d& g) const {
-  const int x0 = static_cast<int>(std::floor(g.x())), y0 = static_cast<int>(std::floor(g.y())),
-            z0 = static_cast<int>(std::floor(g.z()));
-  const float fx = static_cast<float>(g.x() - x0), fy = static_cast<float>(g.y() - y0),
-              fz = static_cast<float>(g.z() - z0);
-  if (x0 >= 0 && y0 >= 0 && z0 >= 0 && x0 + 1 < dims_.x() && y0 + 1 < dims_.y() && z0 + 1 < dims_.z()) {
-    // Inside: the 8 corners without bounds checks.
+  if (g.x() >= 0 && g.y() >= 0 && g.z() >= 0 && g.x() < dims_.x() - 1 && g.y() < dims_.y() - 1 &&
+      g.z() < dims_.z() - 1) {
+    // Inside: truncation is floor, and the 8 corners need no bounds checks.
+    const int x0 = static_cast<int>(g.x()), y0 = static_cast<int>(g.y()), z0 = static_cast<int>(g.z());
+    const float fx = static_cast<float>(g.x() - x0), fy = static_cast<float>(g.y() - y0),
+                fz = static_cast<float>(g.z() - z0);
     const float* v = votes_.data() + Index(x0, y0, z0);
     const std::int64_t dy = dims_.x(), dz = static_cast<std::int64_t>(dims_.x()) * dims_.y();
     const float c00 = v[0] + fx * (v[1] - v[0]), c10 = v[dy] + fx * (v[dy + 1] - v[dy]);
@@ -116,6 +116,10 @@ float VoteGrid::VotesAtGrid(const Eigen::Vector3d& g) const {
     const float c0 = c00 + fy * (c10 - c00), c1 = c01 + fy * (c11 - c01);
     return c0 + fz * (c1 - c0);
   }
+  const int x0 = static_cast<int>(std::floor(g.x())), y0 = static_cast<int>(std::floor(g.y())),
+            z0 = static_cast<int>(std::floor(g.z()));
+  const float fx = static_cast<float>(g.x() - x0), fy = static_cast<float>(g.y() - y0),
+              fz = static_cast<float>(g.z() - z0);
   float sum = 0;
   for (int k = 0; k < 8; ++k) {
     const int x = x0 + (k & 1), y = y0 + ((k >> 1) & 1), z = z0 + ((k >> 2) & 1);

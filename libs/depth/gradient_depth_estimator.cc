@@ -57,6 +57,7 @@ struct PairGeometry {
   const ViewImage* view = nullptr;
   const cv::Mat* image = nullptr;  // the neighbour's smoothed colour image (for C^c)
   const cv::Mat* grey = nullptr;   // and its smoothed grey image (for the patches)
+  FloatImage image_px, grey_px;    // the same two, for sampling
   Eigen::Matrix3d A;      // K_j R_ji K_i^-1: homogeneous j-pixel of p at depth d is d·A·p̃ + a
   Eigen::Vector3d a;      // K_j t_ji
   Eigen::Matrix3d A_inv;  // for H(d)^-1 by Sherman-Morrison
@@ -121,17 +122,36 @@ struct ShiftMeasurement {
 
 class PixelSolver {
  public:
-  PixelSolver(const GradientDepthOptions& o, const cv::Mat& ref_grey, const Eigen::Vector3f& ref_colour)
+  PixelSolver(const GradientDepthOptions& o, const FloatImage& ref_grey, const Eigen::Vector3f& ref_colour)
       : o_(o), ref_grey_(ref_grey), ref_colour_(ref_colour), half_(o.patch_length / 2),
         inv_two_sigma_c2_(1.0 / (2.0 * o.sigma_c * o.sigma_c)) {}
 
+  // Grey levels of I_j on ℓ at s0 - half, s0 - half + 1, ... (count + patch_length - 1
+  // of them; NaN where the bilinear sample is outside): the patch rows on ℓ of
+  // reference points s0, s0 + 1, ... overlap in all but one sample, so a scan
+  // samples each point once.
+  void SampleLine(const EpipolarRay& ray, double s0, int count, std::vector<float>* line) const {
+    const int n = count + 2 * half_;
+    line->resize(n);
+    const Eigen::Vector2d y0 = ray.Point(s0 - half_);
+    for (int t = 0; t < n; ++t) {
+      const Eigen::Vector2d y = y0 + t * ray.u;
+      float v;
+      (*line)[t] = ray.pair->grey_px.Sample1(y.x(), y.y(), &v) ? v : std::numeric_limits<float>::quiet_NaN();
+    }
+  }
+
   // The 2×5 patch at line coordinate s (reference depth D(s)) and its least-squares shift.
-  ShiftMeasurement Measure(const EpipolarRay& ray, double s, int rows) const {
+  // line: when given (rows = 1 only), I_j's samples on ℓ from SampleLine starting at s.
+  // with_colour: false leaves m.colour unset (the match's position is still
+  // checked, so validity does not depend on it); ColourAtMatch fills it later.
+  ShiftMeasurement Measure(const EpipolarRay& ray, double s, int rows, const float* line = nullptr,
+                           bool with_colour = true) const {
     ShiftMeasurement m;
     const double d = ray.Depth(s);
     if (!(d > 0) || !ray.InFront(d)) return m;
-    const cv::Mat& img_j = *ray.pair->image;
-    const cv::Mat& grey_j = *ray.pair->grey;
+    const FloatImage& img_j = ray.pair->image_px;
+    const FloatImage& grey_j = ray.pair->grey_px;
     const int L = 2 * half_ + 1;
     // The plane homography maps each segment on (or beside) ℓ to a segment in
     // I_i: map its start and direction once, then step (homogeneous coordinates).
@@ -143,10 +163,17 @@ class PixelSolver {
       const Eigen::Vector2d y0 = ray.Point(s - half_) + row * ray.n;
       const Eigen::Vector3d base = ray.BackToReferenceH(Eigen::Vector3d(y0.x(), y0.y(), 1.0), d);
       for (int k = 0; k < L; ++k) {
-        const Eigen::Vector2d y = y0 + k * ray.u;
-        if (!SampleBilinear1(grey_j, y.x(), y.y(), &sj[k])) return m;
+        if (line) {
+          sj[k] = line[k];
+          if (std::isnan(sj[k])) return m;
+        } else {
+          const Eigen::Vector2d y = y0 + k * ray.u;
+          if (!grey_j.Sample1(y.x(), y.y(), &sj[k])) return m;
+        }
         const Eigen::Vector3d xh = base + k * step;
-        if (!(xh.z() > 0) || !SampleBilinear1(ref_grey_, xh.x() / xh.z(), xh.y() / xh.z(), &si[k])) return m;
+        if (!(xh.z() > 0)) return m;
+        const double inv_z = 1.0 / xh.z();
+        if (!ref_grey_.Sample1(xh.x() * inv_z, xh.y() * inv_z, &si[k])) return m;
       }
       // Least-squares shift over the interior columns: eq. 2-3 in robust form,
       // gx the patch gradient along ℓ, gy the difference between its rows.
@@ -164,9 +191,13 @@ class PixelSolver {
     m.energy = sxx;
     m.valid = std::isfinite(m.shift);
     if (!m.valid) return m;
-    Eigen::Vector3f c;
     const Eigen::Vector2d y = ray.Point(s + m.shift);
-    if (!SampleBilinear3(img_j, y.x(), y.y(), &c)) {
+    if (!with_colour) {
+      m.valid = img_j.Inside(y.x(), y.y());
+      return m;
+    }
+    Eigen::Vector3f c;
+    if (!img_j.Sample3(y.x(), y.y(), &c)) {
       m.valid = false;
       return m;
     }
@@ -176,13 +207,15 @@ class PixelSolver {
 
   // Best of the reference points s0, s0+1, ... (count of them) by C = C^c·C^d,
   // then Gauss-Newton on the shift. Returns the match coordinate, or NaN.
-  double Search(const EpipolarRay& ray, double s0, int count, ShiftMeasurement* best_out) const {
+  double Search(const EpipolarRay& ray, double s0, int count, ShiftMeasurement* best_out,
+                std::vector<float>* line) const {
     double best_c = -1, best_s = std::numeric_limits<double>::quiet_NaN();
     ShiftMeasurement best;
     // Choosing the reference point needs only the 2×5 patch on ℓ itself.
+    SampleLine(ray, s0, count, line);
     for (int k = 0; k < count; ++k) {
       const double s = s0 + k;
-      const ShiftMeasurement m = Measure(ray, s, 1);
+      const ShiftMeasurement m = Measure(ray, s, 1, line->data() + k);
       if (!m.valid || std::abs(m.shift) > 2.0) continue;
       const double c = m.colour * std::exp(-m.shift * m.shift);  // C^c · C^d (eq. 4, 5)
       if (c > best_c) {
@@ -192,14 +225,24 @@ class PixelSolver {
       }
     }
     if (best_c < 0) return std::numeric_limits<double>::quiet_NaN();
-    // Gauss-Newton on the shift, with the full patch_rows-row patch.
+    // Gauss-Newton on the shift, with the full patch_rows-row patch. C^c is
+    // needed only at the final match: sampled once after the loop.
     double s = best_s + best.shift;
+    bool moved = false;
     for (int it = 0; it < o_.shift_iterations; ++it) {
-      const ShiftMeasurement m = Measure(ray, s, o_.patch_rows);
+      const ShiftMeasurement m = Measure(ray, s, o_.patch_rows, nullptr, false);
       if (!m.valid || std::abs(m.shift) > 1.0) break;
       best = m;
+      moved = true;
       s += m.shift;
       if (std::abs(m.shift) < 0.01) break;
+    }
+    if (moved) {
+      // The last accepted measurement's match is at s (checked inside the image).
+      const Eigen::Vector2d y = ray.Point(s);
+      Eigen::Vector3f c;
+      if (ray.pair->image_px.Sample3(y.x(), y.y(), &c))
+        best.colour = std::exp(-(c - ref_colour_).squaredNorm() * inv_two_sigma_c2_);
     }
     *best_out = best;
     return s;
@@ -211,13 +254,13 @@ class PixelSolver {
     if (!ray.InFront(d)) return 0;
     const Eigen::Vector2d y = ray.Pixel(d);
     Eigen::Vector3f c;
-    if (!SampleBilinear3(*ray.pair->image, y.x(), y.y(), &c)) return 0;
+    if (!ray.pair->image_px.Sample3(y.x(), y.y(), &c)) return 0;
     return std::exp(-(c - ref_colour_).squaredNorm() * inv_two_sigma_c2_);
   }
 
  private:
   const GradientDepthOptions& o_;
-  const cv::Mat& ref_grey_;
+  const FloatImage& ref_grey_;
   Eigen::Vector3f ref_colour_;
   int half_;
   double inv_two_sigma_c2_;
@@ -264,6 +307,8 @@ DepthMap GradientDepthEstimator::Estimate(const ViewImage& reference, const std:
     pg.view = nb;
     pg.image = &nb->smoothed;
     pg.grey = &nb->grey;
+    pg.image_px = FloatImage(nb->smoothed);
+    pg.grey_px = FloatImage(nb->grey);
     Eigen::Matrix3d R;
     Eigen::Vector3d t;
     RelativePose(vi, nb->view, &R, &t);
@@ -328,12 +373,20 @@ DepthMap GradientDepthEstimator::Estimate(const ViewImage& reference, const std:
   spdlog::debug("depth: search range [{:.3f}, {:.3f}] m, {} neighbours", d_near, d_far, pairs.size());
 
   const cv::Mat grad = GradientMagnitude(reference.image);
+  const FloatImage ref_grey_px(ref_prepared->grey);
   const int rows = reference.image.rows, cols = reference.image.cols;
   std::atomic<long long> num_edge{0};
 
   tbb::parallel_for(tbb::blocked_range<int>(0, rows), [&](const tbb::blocked_range<int>& range) {
     std::vector<EpipolarRay> rays(pairs.size());
     std::vector<char> ray_ok(pairs.size());
+    struct Candidate {
+      double own;  // C = C^c·C^d in its own view; -1 once checked
+      double d;
+      int level;   // index into first_level
+    };
+    std::vector<Candidate> candidates;
+    std::vector<float> line;
     for (int r = range.begin(); r != range.end(); ++r) {
       const float* grow = grad.ptr<float>(r);
       for (int c = 0; c < cols; ++c) {
@@ -343,39 +396,59 @@ DepthMap GradientDepthEstimator::Estimate(const ViewImage& reference, const std:
         const Eigen::Vector3d ph(p.x(), p.y(), 1.0);
         const float* srow = ref_prepared->smoothed.ptr<float>(r);
         const Eigen::Vector3f colour(srow[3 * c], srow[3 * c + 1], srow[3 * c + 2]);
-        PixelSolver solver(o, ref_prepared->grey, colour);
+        PixelSolver solver(o, ref_grey_px, colour);
         for (size_t k = 0; k < pairs.size(); ++k) ray_ok[k] = rays[k].Init(pairs[k], ph);
 
         // Level 1: scan the whole depth range in the first-level views; a
         // candidate is scored by its own C and by C^c in the other first-level view.
-        double best_score = -1, best_depth = 0;
+        // Own C = C^c·C^d, times the mean colour agreement over every
+        // neighbour: a repeated texture rarely agrees in all of them.
+        // Agreement is at most 1, so candidates are checked in decreasing
+        // order of their own C and the search stops once that cannot beat the
+        // best: the same winner as checking all of them in scan order (the
+        // first in scan order among equal scores), with a fraction of the checks.
+        candidates.clear();
         for (size_t f = 0; f < first_level.size(); ++f) {
           const EpipolarRay& ray = rays[first_level[f]];
           if (!ray_ok[first_level[f]] || !ray.InFront(d_near)) continue;
           const double s_near = ray.S(d_near);
           const double s_far = ray.InFront(d_far) ? ray.S(d_far) : s_near + o.max_reference_points;
           const int count = std::min(o.max_reference_points, static_cast<int>(std::ceil(s_far - s_near)) + 1);
+          if (count <= 0) continue;
+          solver.SampleLine(ray, s_near, count, &line);
           for (int k = 0; k < count; ++k) {
-            const ShiftMeasurement m = solver.Measure(ray, s_near + k, 1);
+            const ShiftMeasurement m = solver.Measure(ray, s_near + k, 1, line.data() + k);
             if (!m.valid || std::abs(m.shift) > 2.0) continue;
             const double d = ray.Depth(s_near + k + m.shift);
             if (!(d > 0)) continue;
-            // Own C = C^c·C^d, times the mean colour agreement over every
-            // neighbour: a repeated texture rarely agrees in all of them.
-            double score = m.colour * std::exp(-m.shift * m.shift);
-            if (score <= best_score) continue;
-            double agree = 0;
-            int views_seen = 0;
-            for (size_t g = 0; g < pairs.size(); ++g) {
-              if (!ray_ok[g] || static_cast<int>(g) == first_level[f]) continue;
-              agree += solver.ColourAt(rays[g], d);
-              ++views_seen;
-            }
-            if (views_seen > 0) score *= agree / views_seen;
-            if (score > best_score) {
-              best_score = score;
-              best_depth = d;
-            }
+            candidates.push_back({m.colour * std::exp(-m.shift * m.shift), d, static_cast<int>(f)});
+          }
+        }
+        double best_score = -1, best_depth = 0;
+        int best_index = -1;
+        const int num_candidates = static_cast<int>(candidates.size());
+        for (int checked = 0; checked < num_candidates; ++checked) {
+          // Next unchecked candidate with the highest own score (earliest on ties).
+          int q = -1;
+          for (int k = 0; k < num_candidates; ++k)
+            if (candidates[k].own >= 0 && (q < 0 || candidates[k].own > candidates[q].own)) q = k;
+          if (q < 0 || candidates[q].own < best_score) break;
+          Candidate& cand = candidates[q];
+          double score = cand.own;
+          cand.own = -1;  // checked
+          if (score == best_score && q > best_index) continue;  // cannot win the tie
+          double agree = 0;
+          int views_seen = 0;
+          for (size_t g = 0; g < pairs.size(); ++g) {
+            if (!ray_ok[g] || static_cast<int>(g) == first_level[cand.level]) continue;
+            agree += solver.ColourAt(rays[g], cand.d);
+            ++views_seen;
+          }
+          if (views_seen > 0) score *= agree / views_seen;
+          if (score > best_score || (score == best_score && q < best_index)) {
+            best_score = score;
+            best_depth = cand.d;
+            best_index = q;
           }
         }
         if (best_score <= 0) continue;
@@ -398,7 +471,7 @@ DepthMap GradientDepthEstimator::Estimate(const ViewImage& reference, const std:
           const double s_pred = ray.S(depth);
           const int K = o.refine_reference_points;
           ShiftMeasurement m;
-          const double s = solver.Search(ray, s_pred - 0.5 * (K - 1), K, &m);
+          const double s = solver.Search(ray, s_pred - 0.5 * (K - 1), K, &m, &line);
           if (!std::isfinite(s) || std::abs(s - s_pred) > o.outlier_pixels) continue;
           const double d = ray.Depth(s);
           if (!(d > 0)) continue;
