@@ -117,7 +117,10 @@ struct ShiftMeasurement {
   bool valid = false;
   double shift = 0;     // δ: match is at S + δ (pixels along ℓ)
   double energy = 0;    // Σ gx², gradient energy along ℓ
-  double colour = 0;    // C^c at the match (eq. 4)
+  double log_colour = 0;  // log C^c at the match (eq. 4)
+  // log C = log(C^c·C^d) (eq. 4, 5): scores are compared in the log domain, so
+  // one exponential is taken per chosen candidate, not per measurement.
+  double LogScore() const { return log_colour - shift * shift; }
 };
 
 class PixelSolver {
@@ -201,7 +204,7 @@ class PixelSolver {
       m.valid = false;
       return m;
     }
-    m.colour = std::exp(-(c - ref_colour_).squaredNorm() * inv_two_sigma_c2_);
+    m.log_colour = -(c - ref_colour_).squaredNorm() * inv_two_sigma_c2_;
     return m;
   }
 
@@ -209,7 +212,7 @@ class PixelSolver {
   // then Gauss-Newton on the shift. Returns the match coordinate, or NaN.
   double Search(const EpipolarRay& ray, double s0, int count, ShiftMeasurement* best_out,
                 std::vector<float>* line) const {
-    double best_c = -1, best_s = std::numeric_limits<double>::quiet_NaN();
+    double best_c = -std::numeric_limits<double>::infinity(), best_s = std::numeric_limits<double>::quiet_NaN();
     ShiftMeasurement best;
     // Choosing the reference point needs only the 2×5 patch on ℓ itself.
     SampleLine(ray, s0, count, line);
@@ -217,14 +220,14 @@ class PixelSolver {
       const double s = s0 + k;
       const ShiftMeasurement m = Measure(ray, s, 1, line->data() + k);
       if (!m.valid || std::abs(m.shift) > 2.0) continue;
-      const double c = m.colour * std::exp(-m.shift * m.shift);  // C^c · C^d (eq. 4, 5)
+      const double c = m.LogScore();
       if (c > best_c) {
         best_c = c;
         best_s = s;
         best = m;
       }
     }
-    if (best_c < 0) return std::numeric_limits<double>::quiet_NaN();
+    if (!std::isfinite(best_c)) return std::numeric_limits<double>::quiet_NaN();
     // Gauss-Newton on the shift, with the full patch_rows-row patch. C^c is
     // needed only at the final match: sampled once after the loop.
     double s = best_s + best.shift;
@@ -242,7 +245,7 @@ class PixelSolver {
       const Eigen::Vector2d y = ray.Point(s);
       Eigen::Vector3f c;
       if (ray.pair->image_px.Sample3(y.x(), y.y(), &c))
-        best.colour = std::exp(-(c - ref_colour_).squaredNorm() * inv_two_sigma_c2_);
+        best.log_colour = -(c - ref_colour_).squaredNorm() * inv_two_sigma_c2_;
     }
     *best_out = best;
     return s;
@@ -381,7 +384,7 @@ DepthMap GradientDepthEstimator::Estimate(const ViewImage& reference, const std:
     std::vector<EpipolarRay> rays(pairs.size());
     std::vector<char> ray_ok(pairs.size());
     struct Candidate {
-      double own;  // C = C^c·C^d in its own view; -1 once checked
+      double log_own;  // log C = log(C^c·C^d) in its own view; -inf once checked
       double d;
       int level;   // index into first_level
     };
@@ -421,21 +424,23 @@ DepthMap GradientDepthEstimator::Estimate(const ViewImage& reference, const std:
             if (!m.valid || std::abs(m.shift) > 2.0) continue;
             const double d = ray.Depth(s_near + k + m.shift);
             if (!(d > 0)) continue;
-            candidates.push_back({m.colour * std::exp(-m.shift * m.shift), d, static_cast<int>(f)});
+            candidates.push_back({m.LogScore(), d, static_cast<int>(f)});
           }
         }
         double best_score = -1, best_depth = 0;
         int best_index = -1;
+        constexpr double kChecked = -std::numeric_limits<double>::infinity();
         const int num_candidates = static_cast<int>(candidates.size());
         for (int checked = 0; checked < num_candidates; ++checked) {
           // Next unchecked candidate with the highest own score (earliest on ties).
           int q = -1;
           for (int k = 0; k < num_candidates; ++k)
-            if (candidates[k].own >= 0 && (q < 0 || candidates[k].own > candidates[q].own)) q = k;
-          if (q < 0 || candidates[q].own < best_score) break;
+            if (candidates[k].log_own > kChecked && (q < 0 || candidates[k].log_own > candidates[q].log_own)) q = k;
+          if (q < 0) break;
           Candidate& cand = candidates[q];
-          double score = cand.own;
-          cand.own = -1;  // checked
+          double score = std::exp(cand.log_own);
+          if (score < best_score) break;
+          cand.log_own = kChecked;
           if (score == best_score && q > best_index) continue;  // cannot win the tie
           double agree = 0;
           int views_seen = 0;
@@ -479,7 +484,7 @@ DepthMap GradientDepthEstimator::Estimate(const ViewImage& reference, const std:
           const double wgt = m.energy * slope * slope;
           sum_w += wgt;
           sum_wd += wgt * d;
-          matches[num_matches++] = {k, s, d, m.energy, m.colour * std::exp(-m.shift * m.shift)};
+          matches[num_matches++] = {k, s, d, m.energy, std::exp(m.LogScore())};
           depth = sum_wd / sum_w;
         }
         if (num_matches == 0 || !(depth > 0) || !std::isfinite(depth)) continue;
