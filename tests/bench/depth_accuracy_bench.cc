@@ -1,7 +1,7 @@
 // Benchmark (not a test): sparse and filtered depth accuracy, coverage and
 // time per view on a dataset with ground-truth depth (figurines or synthetic).
 //   depth_accuracy_bench DATASET [--gt-views N] [--skip K] [--threads T] [--no-hierarchy] [--no-filter]
-//                        [--every-view]
+//                        [--every-view] [--shift-iterations N] [--voxel METRES]
 // Evaluates the first N views that have ground truth (after skipping the
 // first --skip ones), streaming frames from the start of the sequence.
 // --every-view: depth (and filtering) of every view from the first to the
@@ -35,7 +35,7 @@ void PrintCurve(const char* name, const DepthMetrics& m) {
 int main(int argc, char** argv) {
   if (argc < 2) {
     std::fprintf(stderr, "usage: %s DATASET [--gt-views N] [--skip K] [--threads T] [--no-hierarchy] [--no-filter] "
-                 "[--every-view]\n",
+                 "[--every-view] [--shift-iterations N] [--voxel METRES]\n",
                  argv[0]);
     return 2;
   }
@@ -51,6 +51,7 @@ int main(int argc, char** argv) {
     else if (!std::strcmp(argv[a], "--no-hierarchy")) sopt.gradient.use_hierarchy = false;
     else if (!std::strcmp(argv[a], "--no-filter")) sopt.run_filter = false;
     else if (!std::strcmp(argv[a], "--every-view")) every_view = true;
+    else if (!std::strcmp(argv[a], "--shift-iterations") && a + 1 < argc) sopt.gradient.shift_iterations = std::atoi(argv[++a]);
     else if (!std::strcmp(argv[a], "--voxel") && a + 1 < argc) sopt.filter.voxel_size = std::atof(argv[++a]);
   }
   spdlog::set_level(spdlog::level::warn);
