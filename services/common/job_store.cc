@@ -276,6 +276,36 @@ PipelineOptions JobPipelineOptions(const pb::JobOptions& o) {
   return options;
 }
 
+pb::JobManifest MakeManifest(const std::string& id, const pb::JobSpec& spec, const Dataset& ds) {
+  pb::JobManifest m;
+  m.set_job_id(id);
+  *m.mutable_spec() = spec;
+  for (int i = 0; i < ds.NumViews(); ++i) *m.add_views() = CameraToProto(ds.View(i), ds.views()[i].name);
+  *m.mutable_volume() = BoxToProto(ds.bbox());
+  m.set_pose_source(ds.pose_source());
+  m.set_bbox_source(ds.bbox_source());
+  return m;
+}
+
+DatasetOptions ToDatasetOptions(const pb::JobSpec& spec) {
+  DatasetOptions d;
+  d.dataset_dir = spec.dataset_dir();
+  d.images_dir = spec.images_dir();
+  d.video_path = spec.video_path();
+  d.colmap_dir = spec.colmap_dir();
+  d.transforms_path = spec.transforms_path();
+  if (spec.bbox_size() != 0) {
+    if (spec.bbox_size() != 6) throw OptionError("bbox needs 6 numbers, got " + std::to_string(spec.bbox_size()));
+    BoundingBox b;
+    b.min = Eigen::Vector3d(spec.bbox(0), spec.bbox(1), spec.bbox(2));
+    b.max = Eigen::Vector3d(spec.bbox(3), spec.bbox(4), spec.bbox(5));
+    if (!b.IsValid()) throw OptionError("bbox: each max must be greater than its min");
+    d.bbox = b;
+  }
+  d.Check();
+  return d;
+}
+
 JobGeometry LoadJobGeometry(const JobStore& store, const std::string& id) {
   const pb::JobManifest m = store.ReadManifest(id);
   const std::string what = (store.JobDir(id) / "manifest.pb").string();

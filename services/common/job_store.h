@@ -20,6 +20,7 @@
 #include "depth/depth_map.h"
 #include "geometry/pinhole_view.h"
 #include "geometry/triangle_mesh.h"
+#include "io/dataset.h"
 #include "lfrecon_service.pb.h"
 #include "pipeline/embedded_pipeline.h"
 
@@ -81,6 +82,11 @@ DepthMap DepthMapFromProto(const pb::DepthMap& map, int width, int height, const
 // The embedded pipeline's options for a job: PipelineOptions defaults with the
 // job's overrides, exactly as `lfrecon run` maps its flags.
 PipelineOptions JobPipelineOptions(const pb::JobOptions& options);
+
+// The manifest of job `id` for `spec` opened as `dataset` (what ingest writes).
+pb::JobManifest MakeManifest(const std::string& id, const pb::JobSpec& spec, const Dataset& dataset);
+// The DatasetOptions a JobSpec names; throws OptionError.
+DatasetOptions ToDatasetOptions(const pb::JobSpec& spec);
 
 // A job as a worker or the aggregator sees it: the manifest decoded.
 struct JobGeometry {

@@ -57,6 +57,11 @@ bool DecodeEnvelope(const void* data, std::size_t size, std::int64_t max_message
     error->set_message("malformed message (" + std::to_string(size) + " bytes): not a lfrecon.v1.Envelope");
     return false;
   }
+  if (env->version() == 0) {  // proto3: an absent field reads 0; every sender sets it
+    error->set_code(pb::ERROR_MALFORMED);
+    error->set_message("message without a protocol version (" + std::to_string(size) + " bytes)");
+    return false;
+  }
   if (env->version() != kProtocolVersion) {
     error->set_code(pb::ERROR_VERSION);
     error->set_message("protocol version " + std::to_string(env->version()) + " not supported (this daemon speaks " +

@@ -28,25 +28,6 @@ struct IngestOptions {
   std::int64_t max_message_bytes = kDefaultMaxMessageBytes;
 };
 
-DatasetOptions ToDatasetOptions(const pb::JobSpec& spec) {
-  DatasetOptions d;
-  d.dataset_dir = spec.dataset_dir();
-  d.images_dir = spec.images_dir();
-  d.video_path = spec.video_path();
-  d.colmap_dir = spec.colmap_dir();
-  d.transforms_path = spec.transforms_path();
-  if (spec.bbox_size() != 0) {
-    if (spec.bbox_size() != 6) throw OptionError("bbox needs 6 numbers, got " + std::to_string(spec.bbox_size()));
-    BoundingBox b;
-    b.min = Eigen::Vector3d(spec.bbox(0), spec.bbox(1), spec.bbox(2));
-    b.max = Eigen::Vector3d(spec.bbox(3), spec.bbox(4), spec.bbox(5));
-    if (!b.IsValid()) throw OptionError("bbox: each max must be greater than its min");
-    d.bbox = b;
-  }
-  d.Check();
-  return d;
-}
-
 // Sends `env` to the aggregator until it answers (or the daemon stops / the job is cancelled).
 bool Notify(RequestClient& client, const pb::Envelope& env, const JobStore& store, const std::string& id) {
   while (!StopRequested()) {
@@ -120,14 +101,7 @@ int Serve(const IngestOptions& o) {
         auto ds = std::make_shared<Dataset>(Dataset::Open(ToDatasetOptions(spec)));
         JobPipelineOptions(spec.options());  // validates the options before accepting the job
         const std::string id = store.CreateJob();
-        pb::JobManifest m;
-        m.set_job_id(id);
-        *m.mutable_spec() = spec;
-        for (int i = 0; i < ds->NumViews(); ++i) *m.add_views() = CameraToProto(ds->View(i), ds->views()[i].name);
-        *m.mutable_volume() = BoxToProto(ds->bbox());
-        m.set_pose_source(ds->pose_source());
-        m.set_bbox_source(ds->bbox_source());
-        store.WriteManifest(m);
+        store.WriteManifest(MakeManifest(id, spec, *ds));
         pb::Envelope created = NewEnvelope(id);
         created.mutable_job_created()->set_num_views(ds->NumViews());
         if (!agg.Request(created, std::chrono::milliseconds(5000)))
