@@ -64,6 +64,12 @@ std::unordered_map<std::uint64_t, Eigen::Vector3d> VoxelNormals(const VoxelGrid&
   return normals;
 }
 
+bool BordersUnknown(const VoxelGrid& grid, const Eigen::Vector3i& v) {
+  for (const Eigen::Vector3i& d : kSix)
+    if (grid.State(v + d) == VoxelState::kUnknown) return true;
+  return false;
+}
+
 // Where no mesh vertex reached an exposed voxel: the mean direction to its free neighbours.
 Eigen::Vector3d FallbackNormal(const VoxelGrid& grid, const Eigen::Vector3i& v) {
   Eigen::Vector3d n = Eigen::Vector3d::Zero();
@@ -214,7 +220,8 @@ CarvingResult VoxelCarving(VoxelGrid* grid, const std::vector<ColorView>& color_
 
     std::vector<Eigen::Vector3i> candidates;
     for (const Eigen::Vector3i& v : grid->OccupiedVoxels())
-      if (region.count(Key(v)) && grid->IsExposed(v)) candidates.push_back(v);
+      if (region.count(Key(v)) && grid->IsExposed(v) && !(options.keep_inner_wall && BordersUnknown(*grid, v)))
+        candidates.push_back(v);
     std::vector<signed char> verdict(candidates.size(), 0);  // 1 carve, 0 keep, -1 unseen
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, candidates.size()), [&](const auto& range) {
       for (std::size_t k = range.begin(); k < range.end(); ++k) {

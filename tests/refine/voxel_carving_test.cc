@@ -174,6 +174,37 @@ TEST(VoxelCarving, WithoutViewsOrRoundsNothingIsCarved) {
   EXPECT_GT(r.rounds[0].unseen, 0u);
 }
 
+TEST(VoxelCarving, NeverCarvesIntoTheUnobservedInside) {
+  // Threshold 1: every voxel with any colour variance is inconsistent, so
+  // carving peels three layers; the voxels bordering the unobserved inside
+  // (unknown neighbours) must stay, or the surface would open into it.
+  const Fixture& f = Shared();
+  VoxelGrid grid = VoxelGrid::FromFusion(f.fusion, 0.2);
+  std::vector<Eigen::Vector3i> wall;
+  const Eigen::Vector3i six[6] = {{1, 0, 0}, {-1, 0, 0}, {0, 1, 0}, {0, -1, 0}, {0, 0, 1}, {0, 0, -1}};
+  for (const Eigen::Vector3i& v : grid.OccupiedVoxels())
+    for (const Eigen::Vector3i& d : six)
+      if (grid.State(v + d) == VoxelState::kUnknown) {
+        wall.push_back(v);
+        break;
+      }
+  ASSERT_GT(wall.size(), 1000u);
+  CarvingOptions o;
+  o.consistency_threshold = 1.0;
+  const CarvingResult r = VoxelCarving(&grid, f.color_views, o);
+  EXPECT_GT(r.TotalCarved(), r.occupied_before / 4);
+  std::size_t wall_carved = 0;
+  for (const Eigen::Vector3i& v : wall) wall_carved += grid.State(v) != VoxelState::kOccupied;
+  EXPECT_EQ(wall_carved, 0u);
+  // Without the guard the same carving goes through the shell.
+  VoxelGrid open = VoxelGrid::FromFusion(f.fusion, 0.2);
+  o.keep_inner_wall = false;
+  VoxelCarving(&open, f.color_views, o);
+  wall_carved = 0;
+  for (const Eigen::Vector3i& v : wall) wall_carved += open.State(v) != VoxelState::kOccupied;
+  EXPECT_GT(wall_carved, 0u);
+}
+
 TEST(VoxelCarving, PhotoConsistencyIsTheWeightedColourVariance) {
   // Three views looking at the origin from +x, +y, +z; voxel normal (1, 1, 1)/√3: equal weights.
   std::vector<PinholeView> views;
