@@ -39,8 +39,9 @@ struct GradientDepthOptions {
   // Reference points (one pixel apart) sampled around the predicted match at
   // each level after the first (§3.1: "sample K reference points around").
   int refine_reference_points = 3;
-  // Gauss-Newton steps of the shift at the chosen reference point.
-  int shift_iterations = 3;
+  // Gauss-Newton steps of the shift at the chosen reference point (a third
+  // step changed figurines accuracy by < 0.001 for ~10 % more instructions).
+  int shift_iterations = 2;
   // Final fit: views whose match lies further than this from the fused
   // depth's prediction (pixels along ℓ) are dropped; σ of the scatter term
   // of the confidence (pixels).
