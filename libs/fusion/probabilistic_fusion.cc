@@ -2,6 +2,8 @@
 
 #include <openvdb/io/File.h>
 #include <openvdb/openvdb.h>
+#include <openvdb/tools/Morphology.h>
+#include <openvdb/tools/Prune.h>
 #include <openvdb/tree/ValueAccessor.h>
 #include <spdlog/spdlog.h>
 #include <tbb/blocked_range.h>
@@ -230,9 +232,49 @@ bool ProbabilisticFusion::Integrate(const PinholeView& view, const DepthMap& dep
   m.views.push_back(std::move(compact));
   m.stats.views = static_cast<int>(m.views.size());
   if (view_id >= 0) m.view_ids.insert(view_id);
+  if (m.options.prune_every > 0 && m.views.size() % m.options.prune_every == 0) Prune();
   spdlog::debug("fusion: view {} integrated: {} new voxels, {} active", m.views.size(), num_fresh,
                 m.tree.activeVoxelCount());
   return true;
+}
+
+std::size_t ProbabilisticFusion::Prune() {
+  Impl& m = *impl_;
+  Timer timer;
+  // Keep every voxel at or above prune_below and its 26 neighbours.
+  const float log_keep = static_cast<float>(std::log(m.options.prune_below));
+  openvdb::MaskTree keep;
+  {
+    openvdb::tree::ValueAccessor<openvdb::MaskTree> acc(keep);
+    for (auto it = m.tree.cbeginValueOn(); it; ++it) {
+      if (!it.isVoxelValue()) continue;
+      const Vec2s v = *it;
+      if (v[1] > 0 && v[0] >= log_keep * v[1]) acc.setValueOn(it.getCoord());
+    }
+  }
+  openvdb::tools::dilateActiveValues(keep, 1, openvdb::tools::NN_FACE_EDGE_VERTEX, openvdb::tools::IGNORE_TILES);
+  std::vector<EvidenceLeaf*> leaves;
+  m.tree.getNodes(leaves);
+  std::vector<std::size_t> dropped(leaves.size(), 0);
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, leaves.size()), [&](const auto& range) {
+    for (std::size_t li = range.begin(); li < range.end(); ++li) {
+      EvidenceLeaf& leaf = *leaves[li];
+      const MaskLeaf* k = keep.probeConstLeaf(leaf.origin());
+      for (auto it = leaf.beginValueOn(); it; ++it) {
+        if (k && k->isValueOn(it.pos())) continue;
+        // Back to the background value, so a re-activation back-fills from zero.
+        leaf.setValueOff(it.pos(), Vec2s(0.0f, 0.0f));
+        ++dropped[li];
+      }
+    }
+  });
+  openvdb::tools::pruneInactive(m.tree);
+  std::size_t n = 0;
+  for (std::size_t d : dropped) n += d;
+  m.stats.pruned_voxels += n;
+  m.stats.prune_s += timer.Seconds();
+  spdlog::debug("fusion: pruned {} voxels, {} active", n, m.tree.activeVoxelCount());
+  return n;
 }
 
 FusionStats ProbabilisticFusion::Stats() const {

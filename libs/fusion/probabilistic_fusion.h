@@ -44,7 +44,8 @@ struct FusionStats {
   std::size_t active_voxels = 0;
   std::size_t grid_bytes = 0;   // the OpenVDB tree
   std::size_t store_bytes = 0;  // the compact depth maps kept for back-fill
-  double activate_s = 0, backfill_s = 0, update_s = 0;  // cumulative seconds per phase
+  double activate_s = 0, backfill_s = 0, update_s = 0, prune_s = 0;  // cumulative seconds per phase
+  std::size_t pruned_voxels = 0;  // dropped by pruning, summed over prunes (re-activated ones count again)
 };
 
 class ProbabilisticFusion {
@@ -61,6 +62,9 @@ class ProbabilisticFusion {
   // is ignored and false returned). Throws std::invalid_argument on a size mismatch.
   bool Integrate(const PinholeView& view, const DepthMap& depth, int view_id = -1);
   bool HasView(int view_id) const;
+  // Drops active voxels far below the surface (FusionOptions::prune_below, see
+  // there); Integrate calls it every prune_every views. Returns how many.
+  std::size_t Prune();
 
   const FusionOptions& options() const;
   int NumViews() const;

@@ -172,9 +172,12 @@ PipelineResult EmbeddedPipeline::Run(FrameSource& frames) {
   const FusionStats fs_stats = fusion.Stats();
   st.active_voxels = fs_stats.active_voxels;
   st.grid_bytes = fs_stats.grid_bytes;
-  spdlog::info("run: fused {} views ({:.1f} s depth, {:.1f} s densify, {:.1f} s fusion), {} active voxels",
-               done, ds.seconds_sparse + ds.seconds_filter, st.seconds_densify, st.seconds_fusion,
-               fs_stats.active_voxels);
+  spdlog::info(
+      "run: fused {} views ({:.1f} s depth, {:.1f} s densify, {:.1f} s fusion: {:.1f} activate, {:.1f} back-fill, "
+      "{:.1f} update), {} active voxels, {:.0f} MiB grid + {:.0f} MiB stored maps",
+      done, ds.seconds_sparse + ds.seconds_filter, st.seconds_densify, st.seconds_fusion, fs_stats.activate_s,
+      fs_stats.backfill_s, fs_stats.update_s, fs_stats.active_voxels, fs_stats.grid_bytes / 1048576.0,
+      fs_stats.store_bytes / 1048576.0);
 
   Timer tm;
   MeshingOptions mo = options_.meshing;
@@ -224,6 +227,9 @@ PipelineResult EmbeddedPipeline::Run(FrameSource& frames) {
         {"depth_filter", st.seconds_filter},
         {"densify", st.seconds_densify},
         {"fusion", st.seconds_fusion},
+        {"fusion_activate", fs_stats.activate_s},
+        {"fusion_backfill", fs_stats.backfill_s},
+        {"fusion_update", fs_stats.update_s},
         {"mesh", st.seconds_mesh},
         {"color", st.seconds_color},
         {"write", st.seconds_write},
@@ -240,6 +246,7 @@ PipelineResult EmbeddedPipeline::Run(FrameSource& frames) {
         {"active_voxels", st.active_voxels},
         {"voxels_above_threshold", st.voxels_above_threshold},
         {"grid_bytes", st.grid_bytes},
+        {"depth_store_bytes", fs_stats.store_bytes},
         {"mesh_vertices", st.mesh_vertices},
         {"mesh_triangles", st.mesh_triangles}}},
       {"options",

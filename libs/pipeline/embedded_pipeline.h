@@ -34,8 +34,13 @@ struct PipelineOptions {
   // filtered sparse maps directly.
   bool densify = true;
   PropagationOptions propagation;
-  // Fusion parameters; volume and voxel_size are set by the pipeline.
-  FusionOptions fusion;
+  // Fusion parameters; volume and voxel_size are set by the pipeline. Pruning
+  // every 16 views keeps the per-view update to the voxels near the surface.
+  FusionOptions fusion = [] {
+    FusionOptions f;
+    f.prune_every = 16;
+    return f;
+  }();
   // σ_s of eq. 12-13 used instead of fusion.sigma_s when the maps are dense:
   // the dense confidence |C'_fg - C'_bg| (§4) averages ~0.1 on the foreground
   // (measured on the synthetic sphere) where the sparse one is ~1, so σ_s must

@@ -129,6 +129,37 @@ TEST_P(FusionAccuracy, ExactDepthGivesF1AboveNinetyFivePercentAtOneVoxel) {
 
 INSTANTIATE_TEST_SUITE_P(Shapes, FusionAccuracy, ::testing::Values("sphere", "box"));
 
+TEST(ProbabilisticFusion, PruningKeepsTheSurfaceAndItsValues) {
+  // Pruning drops voxels far below the threshold; what stays must hold the
+  // same H as without pruning, and the mesh must not change in substance.
+  const synth::Scene scene = BoxScene();
+  const Rendered data = RenderAll(scene, testing::SphereRig(40, Eigen::Vector3d::Zero(), 0.6, 160, 90, 40));
+  FusionOptions options = OptionsFor(scene, 0.004);
+  const ProbabilisticFusion full = Fuse(options, data);
+  options.prune_every = 4;
+  const ProbabilisticFusion pruned = Fuse(options, data);
+  const FusionStats sf = full.Stats(), sp = pruned.Stats();
+  std::printf("pruning: %zu active voxels without, %zu with (%zu dropped over the run)\n", sf.active_voxels,
+              sp.active_voxels, sp.pruned_voxels);
+  EXPECT_GT(sp.pruned_voxels, 0u);
+  EXPECT_LT(sp.active_voxels, sf.active_voxels);
+  double max_diff = 0;
+  int missing_above = 0;
+  pruned.ForEachVoxel([&](const Eigen::Vector3i& v, double sum, int n) {
+    int nf = 0;
+    const double hf = full.SurfaceProbability(v, &nf);
+    max_diff = std::max(max_diff, std::abs((n > 0 ? std::exp(sum / n) : 0.0) - hf));
+  });
+  full.ForEachVoxel([&](const Eigen::Vector3i& v, double sum, int n) {
+    if (n > 0 && std::exp(sum / n) >= options.surface_threshold && !pruned.IsActive(v)) ++missing_above;
+  });
+  EXPECT_LE(max_diff, 1e-5);
+  EXPECT_EQ(missing_above, 0) << "a voxel above the threshold was pruned";
+  const MeshMetrics mf = Score(full.ExtractMesh(), synth::GroundTruthMesh(scene), nullptr, 0.004, scene.foreground_bbox());
+  const MeshMetrics mp = Score(pruned.ExtractMesh(), synth::GroundTruthMesh(scene), nullptr, 0.004, scene.foreground_bbox());
+  EXPECT_NEAR(mp.scores[0].fscore, mf.scores[0].fscore, 0.002);
+}
+
 TEST(ProbabilisticFusion, OrderIndependent) {
   const synth::Scene scene = BoxScene();
   const Rendered data = RenderAll(scene, testing::SphereRig(24, Eigen::Vector3d::Zero(), 0.6, 160, 90, 40));

@@ -85,6 +85,7 @@ TEST(EmbeddedPipeline, SphereLoopReachesFScoreAtTwoVoxels) {
   PipelineOptions options;
   options.voxel_size = EnvDouble("LFRECON_PIPE_VOXEL", 0.004);
   options.densify = EnvInt("LFRECON_PIPE_DENSIFY", 1) != 0;
+  options.fusion.prune_every = EnvInt("LFRECON_PIPE_PRUNE_EVERY", options.fusion.prune_every);
   if (std::getenv("LFRECON_PIPE_SIGMA_S")) options.dense_sigma_s = EnvDouble("LFRECON_PIPE_SIGMA_S", 0.7);
   const fs::path out = fs::path(::testing::TempDir()) / "lfrecon_pipeline_test";
   fs::remove_all(out);
