@@ -31,7 +31,7 @@ struct AggregatorOptions {
   std::filesystem::path store;
   std::int64_t max_message_bytes = kDefaultMaxMessageBytes;
   int lease_ms = 60000;  // a view task not returned within this is re-issued
-  int retry_ms = 100;    // a worker with nothing to do asks again after this
+  int retry_ms = 20;     // a worker with nothing to do asks again after this
 };
 
 class Aggregator {

@@ -21,7 +21,7 @@ struct WorkerOptions {
   std::string aggregate = kDefaultAggregateEndpoint;
   std::filesystem::path store;
   std::int64_t max_message_bytes = kDefaultMaxMessageBytes;
-  int cache_entries = 48;  // frames (and, for propagate, sparse maps) kept between tasks
+  int cache_entries = 64;  // frames (and, for propagate, sparse maps) kept between tasks
   // Fault injection for the integration tests: after this many tasks, take the
   // next one and never return it (the process hangs until killed). < 0: off.
   int stall_after_tasks = -1;

@@ -1,10 +1,12 @@
 // lfrecon-propagate: a propagation worker. Each task is one view: voxel-vote
-// filtering (§3.2, FilterDepth) of its sparse map with the sparse maps of the
+// filtering (§3.2, VoteGrid) of its sparse map with the sparse maps of the
 // views within 15°, then edge-aware densification (§4, DepthPropagator) with
 // the frames within 5°, all read from the job store. The dense map goes to the
 // aggregator. With the job's no_densify the filtered map goes instead.
 #include <algorithm>
 #include <iostream>
+#include <memory>
+#include <set>
 
 #include "common/worker_loop.h"
 #include "depth/depth_filter.h"
@@ -30,17 +32,35 @@ int main(int argc, char** argv) {
       const DepthMap& sparse = cache.SparseMap(job, v);
       DepthMap base = sparse;
       if (po.depth.run_filter) {
-        std::vector<int> ids(task.voters().begin(), task.voters().end());
-        ids.push_back(v);
-        std::sort(ids.begin(), ids.end());
-        ids.erase(std::unique(ids.begin(), ids.end()), ids.end());
-        std::vector<const DepthMap*> maps;
-        std::vector<const PinholeView*> views;
-        for (int j : ids) {
-          maps.push_back(&cache.SparseMap(job, j));
-          views.push_back(&g.views.at(j));
+        // The vote grid of the views within 15° (§3.2), kept between tasks and
+        // updated by adding/removing voters, as StreamingDepth slides it: a
+        // worker that gets consecutive views splats ~2 maps per task, not all.
+        static std::string grid_job;
+        static std::unique_ptr<VoteGrid> grid;
+        static std::set<int> in_grid;
+        if (grid_job != job || !grid) {
+          grid = std::make_unique<VoteGrid>(g.volume, po.depth.filter);
+          in_grid.clear();
+          grid_job = job;
         }
-        base = FilterDepth(sparse, g.views[v], maps, views, g.volume, po.depth.filter);
+        std::set<int> voters(task.voters().begin(), task.voters().end());
+        voters.insert(v);
+        for (int j : voters)
+          if (j < 0 || j >= static_cast<int>(g.views.size())) throw std::invalid_argument("voter out of range");
+        for (auto it = in_grid.begin(); it != in_grid.end();) {
+          if (!voters.count(*it)) {
+            grid->Splat(cache.SparseMap(job, *it), g.views[*it], -1.0f);
+            it = in_grid.erase(it);
+          } else {
+            ++it;
+          }
+        }
+        for (int j : voters)
+          if (!in_grid.count(j)) {
+            grid->Splat(cache.SparseMap(job, j), g.views[j], 1.0f);
+            in_grid.insert(j);
+          }
+        base = grid->Filter(sparse, g.views[v]);
       }
       if (!po.densify) return DepthMapToProto(base, v, pb::MAP_FILTERED);
       const ViewImage& ref = cache.Frame(job, v);
