@@ -146,8 +146,8 @@ class PixelSolver {
 
   // The 2×5 patch at line coordinate s (reference depth D(s)) and its least-squares shift.
   // line: when given (rows = 1 only), I_j's samples on ℓ from SampleLine starting at s.
-  // with_colour: false leaves m.colour unset (the match's position is still
-  // checked, so validity does not depend on it); ColourAtMatch fills it later.
+  // with_colour: false leaves m.log_colour unset (the match's position is still
+  // checked, so validity does not depend on it); Search samples it once at the final match.
   ShiftMeasurement Measure(const EpipolarRay& ray, double s, int rows, const float* line = nullptr,
                            bool with_colour = true) const {
     ShiftMeasurement m;
