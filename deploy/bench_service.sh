@@ -16,12 +16,12 @@ fscore() { "$BIN/lfrecon" eval --dataset "$DATA" --mesh "$1" --json 2>/dev/null 
 import json,sys; d=json.load(sys.stdin); print(' '.join('F@%gmm %.4f'%(x['threshold_mm'],x['fscore']) for x in d['scores']))"; }
 echo "dataset $DATA ($N frames), voxel $VOX mm, load average $(cut -d' ' -f1-3 /proc/loadavg)"
 t0=$(date +%s.%N)
-/usr/bin/time -f "%M" -o "$TMP/run_rss" "$BIN/lfrecon" -q run --dataset "$DATA" --voxel-mm "$VOX" --out "$TMP/embedded" >/dev/null
+/usr/bin/time -f "%M %U %S" -o "$TMP/run_rss" "$BIN/lfrecon" -q run --dataset "$DATA" --voxel-mm "$VOX" --out "$TMP/embedded" >/dev/null
 t1=$(date +%s.%N)
 REF=$(python3 -c "
 import json; r=json.load(open('$TMP/embedded/report.json'))['seconds']; print(r.get('refine', 0.0))")
 # The service does not refine (carving + Poisson) yet: compare with run's time without its refine step.
-echo "lfrecon run: $(python3 -c "w=$t1-$t0; r=$REF; print('%.1f s wall, %.1f s refine, %.1f s without refine: %.2f frames/s'%(w, r, w-r, $N/(w-r)))"), peak RSS $(( $(cat "$TMP/run_rss") / 1024 )) MiB, fused mesh (mesh_raw.ply) $(fscore "$TMP/embedded/mesh_raw.ply")"
+echo "lfrecon run: $(python3 -c "w=$t1-$t0; r=$REF; print('%.1f s wall, %.1f s refine, %.1f s without refine: %.2f frames/s'%(w, r, w-r, $N/(w-r)))"), peak RSS $(( $(cut -d" " -f1 "$TMP/run_rss") / 1024 )) MiB, CPU $(awk '{printf "%.1f", $2+$3}' "$TMP/run_rss") s (with refine), fused mesh (mesh_raw.ply) $(fscore "$TMP/embedded/mesh_raw.ply")"
 for W in "${WORKERS[@]}"; do
   export LFRECON_RUN="$TMP/run" LFRECON_BIN="$BIN"
   export LFRECON_INGEST="ipc://$TMP/ingest.sock" LFRECON_AGGREGATE="ipc://$TMP/aggregate.sock"
@@ -32,11 +32,14 @@ for W in "${WORKERS[@]}"; do
   "$BIN/lfrecon" -q status "$JOB" --wait >/dev/null
   t1=$(date +%s.%N)
   "$BIN/lfrecon" -q export "$JOB" -o "$TMP/stack_$W.ply" >/dev/null
-  rss=""
+  rss=""; cpu=0
+  TCK=$(getconf CLK_TCK)
   for f in "$TMP"/run/pids/*.pid; do
-    rss="$rss $(basename "$f" .pid)=$(( $(awk '/VmHWM/{print $2}' /proc/"$(cat "$f")"/status) / 1024 ))MiB"
+    p=$(cat "$f")
+    rss="$rss $(basename "$f" .pid)=$(( $(awk '/VmHWM/{print $2}' /proc/$p/status) / 1024 ))MiB"
+    cpu=$(( cpu + $(awk '{print $14 + $15}' /proc/$p/stat) ))
   done
   echo "stack, $W worker(s) per stage: $(python3 -c "print('%.1f s, %.2f frames/s'%($t1-$t0, $N/($t1-$t0)))"), $(fscore "$TMP/stack_$W.ply")"
-  echo "  peak RSS:$rss"
+  echo "  peak RSS:$rss; CPU of all daemons $(python3 -c "print('%.1f' % ($cpu / $TCK))") s"
   "$ROOT/deploy/stack.sh" stop >/dev/null
 done
