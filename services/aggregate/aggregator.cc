@@ -359,12 +359,15 @@ pb::Envelope Aggregator::Handle(const pb::Envelope& req) {
       }
       case pb::Envelope::kExportRequest:
         return HandleExport(*job, req.export_request());
-      case pb::Envelope::kCancel:
+      case pb::Envelope::kCancel: {
         if (!job->Ended()) {
           store_.WriteText(job->id, "cancelled", "");
           EndJob(*job, pb::STATE_CANCELLED, "cancelled by the user");
         }
-        return ack;
+        pb::Envelope out = NewEnvelope(job->id);  // the state after the request (a job that ended stays as it was)
+        *out.mutable_job_status() = Status(*job);
+        return out;
+      }
       case pb::Envelope::kTaskResult:
         return HandleTaskResult(*job, req.task_result());
       case pb::Envelope::kJobCreated:

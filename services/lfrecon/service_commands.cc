@@ -206,7 +206,9 @@ void AddServiceCommands(CLI::App& root, int* exit_code) {
     cmd->callback([a, exit_code] {
       pb::Envelope req = svc::NewEnvelope(a->job);
       req.mutable_cancel();
-      Call(a->ep.aggregate, req, a->ep.timeout_ms);
+      const pb::JobStatus s = Call(a->ep.aggregate, req, a->ep.timeout_ms).job_status();
+      if (s.state() != pb::STATE_CANCELLED)
+        throw InputError(a->job, "not cancelled: the job had already ended (" + pb::JobState_Name(s.state()).substr(6) + ")");
       std::cout << a->job << ": cancelled\n";
       *exit_code = 0;
     });

@@ -289,6 +289,10 @@ TEST_F(ServiceTest, SubmittedJobOnSeparateProcessesEqualsEmbeddedRun) {
   pb::Envelope refine = NewEnvelope(job);
   refine.mutable_export_request()->set_refine(true);
   EXPECT_EQ(Ask(refine).error().code(), pb::ERROR_NOT_IMPLEMENTED);
+  // Cancelling a finished job leaves it DONE.
+  pb::Envelope cancel = NewEnvelope(job);
+  cancel.mutable_cancel();
+  EXPECT_EQ(Ask(cancel).job_status().state(), pb::STATE_DONE);
   // Daemons stop cleanly on SIGTERM.
   for (auto& p : procs_) EXPECT_EQ(p->Stop(), 0) << p->log();
 }
@@ -357,6 +361,34 @@ TEST_F(ServiceTest, FramesOutOfOrderAndDuplicatedAndExportMidStream) {
   }
   WaitDone(job);
   ExpectSameAsEmbedded(job);
+}
+
+// A job whose frames never come: cancel ends it, no task is handed out for it.
+TEST_F(ServiceTest, CancelStopsAJob) {
+  StartAggregator();
+  JobStore store(store_);
+  pb::JobSpec spec;
+  spec.set_dataset_dir(g_ref->dataset.string());
+  const std::string job = store.CreateJob();
+  store.WriteManifest(MakeManifest(job, spec, Dataset::Open(ToDatasetOptions(spec))));
+  EXPECT_EQ(Status(job).state(), pb::STATE_INGESTING);
+  for (int k = 0; k < 3; ++k) {
+    store.WriteFrame(job, FrameToProto(k, cv::Mat(54, 96, CV_32FC3, cv::Scalar::all(0.5)), pb::Camera()));
+    pb::Envelope env = NewEnvelope(job);
+    env.mutable_frame_spooled()->set_index(k);
+    ASSERT_TRUE(Ask(env).has_ack());
+  }
+  EXPECT_EQ(Status(job).frames_spooled(), 3u);
+  pb::Envelope cancel = NewEnvelope(job);
+  cancel.mutable_cancel();
+  EXPECT_EQ(Ask(cancel).job_status().state(), pb::STATE_CANCELLED);
+  EXPECT_EQ(Status(job).state(), pb::STATE_CANCELLED);
+  EXPECT_TRUE(store.ReadText(job, "cancelled").has_value());  // ingest stops at its next frame
+  pb::Envelope tr = NewEnvelope();
+  tr.mutable_task_request()->set_stage(pb::STAGE_DEPTH);
+  EXPECT_TRUE(Ask(tr).has_no_task());
+  const std::string out = RunCommand(kBin + "lfrecon status " + job + " --aggregate " + agg_);
+  EXPECT_NE(out.find("CANCELLED"), std::string::npos) << out;
 }
 
 TEST_F(ServiceTest, KilledDepthWorkerViewsAreRedone) {
