@@ -21,6 +21,7 @@ void FusionOptions::Check() const {
   LFRECON_CHECK_OPTION(probability_clamp > 0 && probability_clamp < 0.5);
   LFRECON_CHECK_OPTION(surface_threshold > 0 && surface_threshold < 1);
   LFRECON_CHECK_OPTION(activation_step > 0 && activation_step <= 2);
+  LFRECON_CHECK_OPTION(activation_min_confidence >= 0 && activation_min_confidence <= 1);
   LFRECON_CHECK_OPTION(prune_every >= 0);
   LFRECON_CHECK_OPTION(prune_below > 0 && prune_below <= surface_threshold);
   const Eigen::Vector3d n = volume.Extent() / voxel_size;

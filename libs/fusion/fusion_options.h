@@ -56,6 +56,11 @@ struct FusionOptions {
   // instead of 0.5 cuts activation 3x and F@2mm by < 0.001 (other views fill
   // the few voxels one view's rays miss).
   double activation_step = 1.0;
+  // Only foreground pixels with c_i at least this activate new voxels (all
+  // pixels still give evidence to active ones). Dense maps (§4) carry many
+  // weak, noisy depths whose bands would otherwise activate most of the
+  // grid; the activated set stays a union over views, so order independence holds.
+  double activation_min_confidence = 0.0;
   // Pruning (our addition, for speed): every `prune_every` views (0: never),
   // active voxels with H below `prune_below` and no neighbour (26-connected)
   // at or above it are dropped, so each later view updates fewer voxels. It

@@ -92,6 +92,7 @@ openvdb::MaskTree ProbabilisticFusion::Impl::Activate(const CompactDepthView& cv
       for (int c = 0; c < view.width; ++c) {
         const CompactDepthView::Pixel& p = cv.at(r, c);
         if (p.depth == 0 || CompactDepthView::Label(p) != DepthLabel::kForeground) continue;
+        if (CompactDepthView::Confidence(p) < options.activation_min_confidence) continue;
         const double d = cv.Depth(p);
         // Sub-pixel rays so that neighbouring rays are at most `lateral` apart at depth d.
         const int k = std::clamp(static_cast<int>(std::ceil(d / f / lateral)), 1, 16);

@@ -3,7 +3,7 @@
 // against the dataset's ground-truth mesh. Tunes fusion without re-running
 // the depth stages (which take most of a run).
 //
-//   fusion_from_depth_bench DATASET DEPTH_OUT [--sigma-s 0.1,0.15,0.2] [--voxel-mm 2] [--prune-every 16]
+//   fusion_from_depth_bench DATASET DEPTH_OUT [--sigma-s 0.1,0.15,0.2] [--voxel-mm 2] [--prune-every 16] [--activation-min-confidence 0.05]
 //
 // DEPTH_OUT holds depth/<stem>.pfm and confidence/<stem>.pfm; labels are not
 // stored, so a depth is foreground when its point lies inside V.
@@ -29,7 +29,7 @@ namespace fs = std::filesystem;
 int main(int argc, char** argv) {
   if (argc < 3) {
     std::fprintf(stderr,
-                 "usage: %s DATASET DEPTH_OUT [--sigma-s a,b,...] [--voxel-mm MM] [--prune-every N] [--keep-mesh DIR]\n",
+                 "usage: %s DATASET DEPTH_OUT [--sigma-s a,b,...] [--voxel-mm MM] [--prune-every N] [--activation-min-confidence C] [--keep-mesh DIR]\n",
                  argv[0]);
     return 2;
   }
@@ -38,6 +38,7 @@ int main(int argc, char** argv) {
   double voxel_mm = 0;
   int prune_every = 16;
   fs::path keep_dir;
+  double min_conf = 0;
   for (int a = 3; a + 1 < argc; a += 2) {
     const std::string k = argv[a], v = argv[a + 1];
     if (k == "--sigma-s") {
@@ -49,6 +50,8 @@ int main(int argc, char** argv) {
       voxel_mm = std::atof(v.c_str());
     } else if (k == "--prune-every") {
       prune_every = std::atoi(v.c_str());
+    } else if (k == "--activation-min-confidence") {
+      min_conf = std::atof(v.c_str());
     } else if (k == "--keep-mesh") {
       keep_dir = v;
     } else {
@@ -84,7 +87,7 @@ int main(int argc, char** argv) {
   std::printf("%zu depth maps from %s\n", maps.size(), depth_dir.c_str());
   if (maps.empty()) return 1;
   const double voxel = voxel_mm > 0 ? voxel_mm / 1000 : ds.bbox().Extent().maxCoeff() / 256;
-  std::printf("voxel %.3f mm, prune every %d\n", voxel * 1000, prune_every);
+  std::printf("voxel %.3f mm, prune every %d, activation min confidence %.3f\n", voxel * 1000, prune_every, min_conf);
   std::printf("sigma_s  F@2    F@5    F@10   P@5    R@5    thin@5  triangles  active  fuse_s\n");
   for (double s : sigmas) {
     FusionOptions fo;
@@ -92,6 +95,7 @@ int main(int argc, char** argv) {
     fo.voxel_size = voxel;
     fo.sigma_s = s;
     fo.prune_every = prune_every;
+    fo.activation_min_confidence = min_conf;
     ProbabilisticFusion fusion(fo);
     Timer t;
     for (std::size_t k = 0; k < maps.size(); ++k) fusion.Integrate(ds.View(ids[k]), maps[k], ids[k]);

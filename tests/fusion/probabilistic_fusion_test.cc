@@ -160,6 +160,35 @@ TEST(ProbabilisticFusion, PruningKeepsTheSurfaceAndItsValues) {
   EXPECT_NEAR(mp.scores[0].fscore, mf.scores[0].fscore, 0.002);
 }
 
+TEST(ProbabilisticFusion, WeakDepthsDoNotActivateVoxels) {
+  // A view whose depths are all weak (c = 0.02) and displaced 3 cm towards the
+  // camera: with activation_min_confidence it adds no voxels of its own, and
+  // the confident views' voxels keep exactly the H they would have had.
+  const synth::Scene scene = BoxScene();
+  Rendered data = RenderAll(scene, testing::SphereRig(24, Eigen::Vector3d::Zero(), 0.6, 160, 90, 40));
+  DepthMap weak;
+  weak.depth = data.depths[0].depth.clone();
+  if (!data.depths[0].label.empty()) weak.label = data.depths[0].label.clone();
+  weak.confidence = cv::Mat(weak.depth.size(), CV_32F, cv::Scalar(0.02f));
+  cv::Mat shifted = weak.depth - 0.03;
+  shifted.copyTo(weak.depth, weak.depth > 0.05);
+  FusionOptions options = OptionsFor(scene, 0.004);
+  options.activation_min_confidence = 0.05;
+  const ProbabilisticFusion confident_only = Fuse(options, data);
+  data.views.push_back(data.views[0]);
+  data.depths.push_back(weak);
+  const ProbabilisticFusion with_weak = Fuse(options, data);
+  options.activation_min_confidence = 0;
+  const ProbabilisticFusion unfiltered = Fuse(options, data);
+  EXPECT_EQ(with_weak.Stats().active_voxels, confident_only.Stats().active_voxels);
+  EXPECT_GT(unfiltered.Stats().active_voxels, with_weak.Stats().active_voxels + 1000);
+  double max_diff = 0;
+  with_weak.ForEachVoxel([&](const Eigen::Vector3i& v, double sum, int n) {
+    max_diff = std::max(max_diff, std::abs(std::exp(sum / n) - unfiltered.SurfaceProbability(v)));
+  });
+  EXPECT_LE(max_diff, 1e-5);
+}
+
 TEST(ProbabilisticFusion, OrderIndependent) {
   const synth::Scene scene = BoxScene();
   const Rendered data = RenderAll(scene, testing::SphereRig(24, Eigen::Vector3d::Zero(), 0.6, 160, 90, 40));
