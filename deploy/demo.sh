@@ -1,14 +1,16 @@
 #!/usr/bin/env bash
 # README command 1: install what is missing, build, and run the main job on
-# the embedded default: generate a dense synthetic light field (480 frames, one
-# loop), summarise it, estimate sparse depth (§3.1) for a few views and
-# measure it against the generator's exact depth.
+# the embedded default: generate a dense synthetic light field (240 frames,
+# 320x180, one loop), reconstruct it with `lfrecon run` (depth, filtering,
+# densification, fusion, refinement) and score the mesh against the
+# generator's ground truth.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 ./deploy/install_deps.sh
 ./deploy/build.sh
 OUT="${OUT:-out/demo}"
-./build/bin/lfrecon synth --out "$OUT/dataset" --frames 480
+./build/bin/lfrecon synth --out "$OUT/dataset" --frames 240 --width 320 --height 180
 ./build/bin/lfrecon info --dataset "$OUT/dataset"
-./build/bin/lfrecon depth --dataset "$OUT/dataset" --out "$OUT/depth" --views 240:288:8 --stage sparse
-./build/bin/lfrecon eval-depth --dataset "$OUT/dataset" --depth "$OUT/depth/depth"
+./build/bin/lfrecon run --dataset "$OUT/dataset" --out "$OUT/run"
+./build/bin/lfrecon eval --dataset "$OUT/dataset" --mesh "$OUT/run/mesh.ply"
+echo "demo: mesh, fused mesh, grid, report and turntable render in $OUT/run"

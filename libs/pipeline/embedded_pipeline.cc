@@ -30,6 +30,8 @@ void PipelineOptions::Check() const {
   meshing.Check();
   coloring.Check();
   if (color_views < 0) throw OptionError("color_views must be >= 0");
+  if (refine) refine_options.Check();
+  if (carving_views < 0) throw OptionError("carving_views must be >= 0");
   if (!(dense_sigma_s > 0)) throw OptionError("dense_sigma_s must be positive");
 }
 
@@ -113,12 +115,20 @@ PipelineResult EmbeddedPipeline::Run(FrameSource& frames) {
   const int k = std::min<int>(options_.color_views, static_cast<int>(wanted.size()));
   for (int c = 0; c < k; ++c) color_ids.insert(wanted[static_cast<std::size_t>(c) * wanted.size() / k]);
   std::vector<ColorView> color_views;
+  // Frames kept for carving, likewise.
+  std::set<int> carve_ids;
+  const int kc = options_.refine && options_.refine_options.carve
+                     ? std::min<int>(options_.carving_views, static_cast<int>(wanted.size()))
+                     : 0;
+  for (int c = 0; c < kc; ++c) carve_ids.insert(wanted[static_cast<std::size_t>(c) * wanted.size() / kc]);
+  std::vector<ColorView> carve_views;
 
   StreamingDepth depth(views_, volume_, options_.depth);
   depth.SetFrameTap([&](int f, const ViewImage& v) {
     if (refcount[f] > 0) window[f] = v;  // shares the pixels with the depth stage's window
     st.max_frames_held_pipeline = std::max(st.max_frames_held_pipeline, static_cast<int>(window.size()));
     if (color_ids.count(f)) color_views.push_back({views_[f], v.image, cv::Mat()});
+    if (carve_ids.count(f)) carve_views.push_back({views_[f], v.image, cv::Mat()});
   });
 
   const DepthPropagator propagator(options_.propagation);
@@ -187,8 +197,18 @@ PipelineResult EmbeddedPipeline::Run(FrameSource& frames) {
   });
   result.mesh_raw = fusion.ExtractMesh(mo);
   st.seconds_mesh = tm.Seconds();
-  // TODO(carving): carving and Poisson go here; until then the final mesh is the fused one.
-  result.mesh = result.mesh_raw;
+  st.carving_frames = static_cast<int>(carve_views.size());
+  if (options_.refine) {
+    Timer tr;
+    RefineResult refined = RefineFusedSurface(fusion, carve_views, options_.refine_options, mo);
+    st.refine = refined.stats;
+    st.seconds_refine = tr.Seconds();
+    // Too few boundary voxels for Poisson: keep the fused surface rather than nothing.
+    result.mesh = refined.mesh.triangles.empty() ? result.mesh_raw : std::move(refined.mesh);
+  } else {
+    result.mesh = result.mesh_raw;
+  }
+  carve_views.clear();
   st.mesh_vertices = result.mesh.vertices.size();
   st.mesh_triangles = result.mesh.triangles.size();
   Timer tc;
@@ -231,6 +251,9 @@ PipelineResult EmbeddedPipeline::Run(FrameSource& frames) {
         {"fusion_backfill", fs_stats.backfill_s},
         {"fusion_update", fs_stats.update_s},
         {"mesh", st.seconds_mesh},
+        {"refine", st.seconds_refine},
+        {"refine_carving", st.refine.seconds_carving},
+        {"refine_poisson", st.refine.seconds_poisson},
         {"color", st.seconds_color},
         {"write", st.seconds_write},
         {"total", st.seconds_total}}},
@@ -248,7 +271,14 @@ PipelineResult EmbeddedPipeline::Run(FrameSource& frames) {
         {"grid_bytes", st.grid_bytes},
         {"depth_store_bytes", fs_stats.store_bytes},
         {"mesh_vertices", st.mesh_vertices},
-        {"mesh_triangles", st.mesh_triangles}}},
+        {"mesh_triangles", st.mesh_triangles},
+        {"carving_frames", st.carving_frames},
+        {"occupied_voxels", st.refine.occupied_voxels},
+        {"carving_region_voxels", st.refine.region_voxels},
+        {"carved_voxels", st.refine.carved},
+        {"carved_per_round", st.refine.carved_per_round},
+        {"poisson_points", st.refine.poisson_points},
+        {"poisson_depth", st.refine.poisson_depth}}},
       {"options",
        {{"densify", options_.densify},
         {"run_filter", options_.depth.run_filter},
@@ -264,8 +294,10 @@ PipelineResult EmbeddedPipeline::Run(FrameSource& frames) {
           {"silhouette_ratio", po.photo.silhouette_ratio},
           {"dt_sigma_spatial", po.dt_sigma_spatial},
           {"dt_sigma_color", po.dt_sigma_color}}},
-        {"carving", false},
-        {"poisson", false}}},
+        {"carving", options_.refine && options_.refine_options.carve && st.carving_frames > 0},
+        {"poisson", options_.refine},
+        {"consistency_threshold", options_.refine_options.carving.consistency_threshold},
+        {"carving_rounds", options_.refine_options.carving.max_rounds}}},
   };
   if (write) {
     std::ofstream f(options_.out_dir / "report.json");

@@ -8,9 +8,9 @@
 // neighbourhood windows (frames within 5° of the views still to be densified,
 // plus `color_views` frames kept for colouring), never by the sequence length.
 //
-// Carving and Poisson are not part of it yet: the final mesh is the fused mesh
-// (TODO(carving): insert between ExtractMesh and colouring; mesh_raw stays the
-// fused mesh).
+// The fused mesh is then refined (§5 end, libs/refine): voxel carving by the
+// photo-consistency of `carving_views` kept frames, and screened Poisson of
+// the carved surface's boundary voxels; mesh_raw stays the fused mesh.
 #include <filesystem>
 #include <functional>
 #include <nlohmann/json.hpp>
@@ -25,6 +25,7 @@
 #include "geometry/triangle_mesh.h"
 #include "io/frame_source.h"
 #include "propagation/depth_propagator.h"
+#include "refine/refine.h"
 
 namespace lfrecon {
 
@@ -61,6 +62,13 @@ struct PipelineOptions {
   // Frames kept (evenly spread over the processed views) to colour the mesh; 0: no colours.
   int color_views = 8;
   ColoringOptions coloring;
+  // Refinement after fusion (BRIEF §1.6): voxel carving and screened Poisson;
+  // false: the final mesh is the fused iso-surface.
+  bool refine = true;
+  RefineOptions refine_options;
+  // Frames kept (evenly spread over the processed views) for carving's
+  // photo-consistency (eqs. 15-16); frames also kept for colour share pixels.
+  int carving_views = 24;
   // Views to process (sequence indices); empty: all.
   std::vector<int> views;
   // Where to write mesh.ply, mesh_raw.ply, grid.vdb, report.json, mesh_turntable.png (and depth/
@@ -88,11 +96,14 @@ struct PipelineStats {
   // Seconds per stage (depth sparse/filter are StreamingDepth's own totals).
   double seconds_sparse = 0, seconds_filter = 0, seconds_densify = 0, seconds_fusion = 0;
   double seconds_mesh = 0, seconds_color = 0, seconds_write = 0, seconds_total = 0;
+  double seconds_refine = 0;  // carving + Poisson (their split is in `refine`)
+  int carving_frames = 0;
+  RefineStats refine;  // when options.refine
   std::int64_t peak_rss_bytes = 0;
 };
 
 struct PipelineResult {
-  TriangleMesh mesh;      // final (coloured); for now the fused mesh
+  TriangleMesh mesh;      // final (coloured): the refined surface, or the fused one without refinement
   TriangleMesh mesh_raw;  // before carving (the fused mesh, uncoloured)
   PipelineStats stats;
   nlohmann::json report;  // what report.json holds
