@@ -36,16 +36,19 @@ struct PipelineOptions {
   bool densify = true;
   PropagationOptions propagation;
   // Fusion parameters; volume and voxel_size are set by the pipeline. Dense
-  // depths weaker than c = 0.03 give evidence but activate no voxels: on the
-  // figurines (480 views, 2.1 mm voxels, σ_s 0.15) that cuts active voxels
-  // 5.7M -> 2.7M, fusion time ~2.4x, and raises F@5mm 0.618 -> 0.681 with
-  // thin recall 0.686 -> 0.681 (0.05: F 0.690, thin 0.643; 0.08: 0.678, 0.500;
-  // fusion_from_depth_bench). Pruning (prune_every) stays off: the voxels it
-  // drops keep coming back and back-filling them cost more than it saved
-  // (figurines: 208 s of back-fill in a 253 s fusion with pruning every 16 views).
+  // depths weaker than c = 0.01 give evidence but activate no voxels. Measured
+  // with fusion_from_depth_bench (σ_s 0.15) as F@5mm / thin recall@5mm:
+  //   min c      0            0.01         0.03         0.05
+  //   figurines  0.618/0.686  0.647/0.685  0.681/0.681  0.690/0.643
+  //   demo       0.795/0.500  0.808/0.403  0.809/0.219  -
+  // (demo: the synthetic tabletop of deploy/demo.sh, 320x180). Higher values
+  // are faster and more precise but lose thin parts, whose dense depths are
+  // the weakest; 0.01 keeps the figurines' thin recall. Pruning (prune_every)
+  // stays off: the voxels it drops keep coming back, and back-filling them
+  // cost more than it saved (figurines: 208 s of back-fill in a 253 s fusion).
   FusionOptions fusion = [] {
     FusionOptions f;
-    f.activation_min_confidence = 0.03;
+    f.activation_min_confidence = 0.01;
     return f;
   }();
   // σ_s of eq. 12-13 used instead of fusion.sigma_s when the maps are dense:
