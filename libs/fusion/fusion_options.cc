@@ -24,6 +24,7 @@ void FusionOptions::Check() const {
   LFRECON_CHECK_OPTION(activation_min_confidence >= 0 && activation_min_confidence <= 1);
   LFRECON_CHECK_OPTION(prune_every >= 0);
   LFRECON_CHECK_OPTION(prune_below > 0 && prune_below <= surface_threshold);
+  LFRECON_CHECK_OPTION(store_max_block >= 1 && store_max_block <= 1024 && (store_max_block & (store_max_block - 1)) == 0);
   const Eigen::Vector3d n = volume.Extent() / voxel_size;
   if (n.maxCoeff() > (1 << 20))
     throw OptionError("fusion: V is " + std::to_string(n.maxCoeff()) +

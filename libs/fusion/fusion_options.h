@@ -71,6 +71,24 @@ struct FusionOptions {
   int prune_every = 0;
   double prune_below = 0.05;
 
+  // Memory budget of the back-fill store (the CompactDepthViews kept of every
+  // integrated view, 4 bytes per pixel: 422 MiB for the figurines' 480
+  // 640x360 views, 11 GB for 3000 1280x720 ones). While the store fits, H is
+  // exact and order independent. Over the budget, the oldest of the finest
+  // stored views are coarsened, 2x2 blocks into one (memory / 4 each time, see
+  // CompactDepthView::Coarsened), down to store_max_block pixels per block, so
+  // memory stays bounded: the default 1 GiB holds 3000 720p views at 4x4
+  // blocks or finer. Only back-fill (voxels activated after a view was
+  // coarsened) uses coarsened views; every view's own update is full
+  // resolution. Cost: H then depends slightly on the order, and voxels near
+  // silhouettes of coarsened views lose some free-space evidence (the object
+  // is dilated by up to a block in those views, never eroded: thin features
+  // are kept). 0: unlimited (always exact). Once every view is at
+  // store_max_block the store grows again, by ~1/store_max_block² of the
+  // full size per view (14 KB per 720p view at 16).
+  std::size_t store_budget_bytes = std::size_t{1} << 30;
+  int store_max_block = 16;  // a power of 2, >= 1
+
   // Throws OptionError.
   void Check() const;
 

@@ -70,7 +70,36 @@ struct ProbabilisticFusion::Impl {
   void BackFill(const openvdb::MaskTree& fresh, std::size_t num_previous);
   void Apply(const SurfaceEvidence& evidence);
   bool LeafOutsideView(const Coord& origin, const PinholeView& view) const;
+  void EnforceBudget();
+  bool warned_budget = false;
 };
+
+void ProbabilisticFusion::Impl::EnforceBudget() {
+  const std::size_t budget = options.store_budget_bytes;
+  if (budget == 0) return;
+  while (stats.store_bytes > budget) {
+    // The oldest of the finest views.
+    std::size_t best = views.size();
+    for (std::size_t i = 0; i < views.size(); ++i)
+      if (views[i]->block() < options.store_max_block && (best == views.size() || views[i]->block() < views[best]->block()))
+        best = i;
+    if (best == views.size()) {
+      if (!warned_budget)
+        spdlog::warn("fusion: the depth store ({:.0f} MiB) exceeds its budget ({:.0f} MiB) with every view at {}x{} "
+                     "blocks; it keeps growing",
+                     stats.store_bytes / 1048576.0, budget / 1048576.0, options.store_max_block,
+                     options.store_max_block);
+      warned_budget = true;
+      return;
+    }
+    CompactDepthView& v = *views[best];
+    const std::size_t before = v.MemoryBytes();
+    if (v.block() == 1) ++stats.store_coarsened_views;
+    v = v.Coarsened(options.BandHalfWidth());
+    stats.store_bytes = stats.store_bytes - before + v.MemoryBytes();
+    stats.store_max_block = std::max(stats.store_max_block, v.block());
+  }
+}
 
 openvdb::MaskTree ProbabilisticFusion::Impl::Activate(const CompactDepthView& cv) const {
   const PinholeView& view = cv.view();
@@ -231,6 +260,9 @@ bool ProbabilisticFusion::Integrate(const PinholeView& view, const DepthMap& dep
 
   m.stats.store_bytes += compact->MemoryBytes();
   m.views.push_back(std::move(compact));
+  timer.Restart();
+  m.EnforceBudget();
+  m.stats.coarsen_s += timer.Seconds();
   m.stats.views = static_cast<int>(m.views.size());
   if (view_id >= 0) m.view_ids.insert(view_id);
   if (m.options.prune_every > 0 && m.views.size() % m.options.prune_every == 0) Prune();

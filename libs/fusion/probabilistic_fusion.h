@@ -19,6 +19,21 @@
 // Every active voxel thus ends with the evidence of every view, whatever the
 // order: H is order independent (up to float rounding of the sums).
 //
+// Memory budget (FusionOptions::store_budget_bytes). The store of (b) grows
+// with the sequence (4 bytes per pixel per view: 11 GB for 3000 720p views),
+// so over its budget it coarsens stored views, the oldest of the finest
+// first, by 2x2 blocks each time (CompactDepthView::Coarsened). Why this
+// approximation: back-fill is the only reader of old views, and the voxels it
+// serves are activated late — after most views have voted — so they are few
+// and mostly off the surface (noise bands, surfaces first seen from a new
+// side), where free-space evidence dominates and a block's front-most depth
+// gives the same vote as its pixels. What it costs: a late voxel near a
+// coarsened view's silhouette gets that view's surface vote instead of its
+// free-space vote (the object dilates by up to a block there, never erodes),
+// and H depends a little on the order (views integrated early are stored
+// coarser). Measured in tests/fusion/probabilistic_fusion_test.cc
+// (StoreBudget*) and docs/benchmarks.md ("Fusion at scale").
+//
 // Not thread-safe: one Integrate at a time (each call is parallel inside).
 #include <Eigen/Core>
 #include <cstddef>
@@ -44,6 +59,9 @@ struct FusionStats {
   std::size_t active_voxels = 0;
   std::size_t grid_bytes = 0;   // the OpenVDB tree
   std::size_t store_bytes = 0;  // the compact depth maps kept for back-fill
+  int store_coarsened_views = 0;  // stored views coarsened for the budget
+  int store_max_block = 1;        // largest block (pixels per side) in the store
+  double coarsen_s = 0;           // cumulative seconds spent coarsening
   double activate_s = 0, backfill_s = 0, update_s = 0, prune_s = 0;  // cumulative seconds per phase
   std::size_t pruned_voxels = 0;  // dropped by pruning, summed over prunes (re-activated ones count again)
 };

@@ -9,6 +9,8 @@ namespace lfrecon {
 CompactDepthView::CompactDepthView(const PinholeView& view, const DepthMap& depth, const BoundingBox& volume)
     : view_(view) {
   const int rows = view.height, cols = view.width;
+  grid_width_ = cols;
+  grid_height_ = rows;
   pixels_.assign(static_cast<std::size_t>(rows) * cols, Pixel{});
   if (depth.depth.empty()) return;
   CV_Assert(depth.depth.type() == CV_32F && depth.depth.rows == rows && depth.depth.cols == cols);
@@ -87,6 +89,67 @@ int CompactDepthView::CountForeground() const {
   return n;
 }
 
+CompactDepthView CompactDepthView::Coarsened(double band) const {
+  CompactDepthView out;
+  out.view_ = view_;
+  out.near_ = near_;
+  out.far_ = far_;
+  out.step_ = step_;
+  out.block_ = 2 * block_;
+  out.grid_width_ = (grid_width_ + 1) / 2;
+  out.grid_height_ = (grid_height_ + 1) / 2;
+  out.pixels_.assign(static_cast<std::size_t>(out.grid_width_) * out.grid_height_, Pixel{});
+  if (pixels_.empty()) return out;
+  const double band_codes = step_ > 0 ? band / step_ : 0;
+  const auto fg = static_cast<std::uint8_t>(DepthLabel::kForeground);
+  const auto bg = static_cast<std::uint8_t>(DepthLabel::kBackground);
+  for (int r = 0; r < out.grid_height_; ++r) {
+    for (int c = 0; c < out.grid_width_; ++c) {
+      const Pixel* kids[4];
+      int n = 0;
+      for (int k = 0; k < 4; ++k) {
+        const int rr = 2 * r + (k >> 1), cc = 2 * c + (k & 1);
+        if (rr >= grid_height_ || cc >= grid_width_) continue;
+        const Pixel& p = at(rr, cc);
+        if (p.depth != 0) kids[n++] = &p;
+      }
+      Pixel& q = out.pixels_[static_cast<std::size_t>(r) * out.grid_width_ + c];
+      std::uint16_t front = kBeyond;
+      bool any_fg = false;
+      for (int k = 0; k < n; ++k)
+        if (kids[k]->label == fg) {
+          any_fg = true;
+          front = std::min(front, kids[k]->depth);
+        }
+      if (any_fg) {
+        int sum = 0, m = 0;
+        for (int k = 0; k < n; ++k)
+          if (kids[k]->label == fg && kids[k]->depth - front <= band_codes) {
+            sum += kids[k]->confidence;
+            ++m;
+          }
+        q.depth = front;
+        q.label = fg;
+        q.confidence = static_cast<std::uint8_t>((sum + m / 2) / m);
+        continue;
+      }
+      int sum = 0, m = 0;
+      for (int k = 0; k < n; ++k)
+        if (kids[k]->label == bg) {
+          front = std::min(front, kids[k]->depth);  // kBeyond is the largest code
+          sum += kids[k]->confidence;
+          ++m;
+        }
+      if (m == 0) continue;
+      q.depth = front;
+      q.label = bg;
+      q.confidence = static_cast<std::uint8_t>((sum + m / 2) / m);
+      if (q.confidence == 0) q = Pixel{};
+    }
+  }
+  return out;
+}
+
 SurfaceEvidence::SurfaceEvidence(const CompactDepthView& view, const FusionOptions& options) : view_(&view) {
   P_ = view.view().K * view.view().R;
   p_ = view.view().K * view.view().t;
@@ -107,6 +170,10 @@ double SurfaceEvidence::Probability(double c, double sigma_s, double clamp) {
 
 bool SurfaceEvidence::Sample(double u, double v, DepthLabel* label, double* depth, double* confidence) const {
   const CompactDepthView& m = *view_;
+  if (m.block() > 1) {  // stored pixels are blocks: sample in block units
+    u /= m.block();
+    v /= m.block();
+  }
   const int col = static_cast<int>(u), row = static_cast<int>(v);
   const CompactDepthView::Pixel& p = m.at(row, col);
   if (p.depth == 0) return false;
@@ -123,7 +190,7 @@ bool SurfaceEvidence::Sample(double u, double v, DepthLabel* label, double* dept
   double wsum = 0, dsum = 0, csum = 0;
   for (int k = 0; k < 4; ++k) {
     const int rr = r0 + (k >> 1), cc = c0 + (k & 1);
-    if (rr < 0 || cc < 0 || rr >= m.height() || cc >= m.width()) continue;
+    if (rr < 0 || cc < 0 || rr >= m.grid_height() || cc >= m.grid_width()) continue;
     const CompactDepthView::Pixel& q = m.at(rr, cc);
     if (q.depth == 0 || q.label != p.label) continue;
     if (beyond != (q.depth == CompactDepthView::kBeyond)) continue;

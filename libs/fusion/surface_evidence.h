@@ -4,7 +4,9 @@
 // view so that voxels activated later can be back-filled with exactly the
 // evidence they would have received had they been active from the start
 // (order independence). Direct updates and back-fill both go through
-// SurfaceEvidence on the same quantised data, so they agree bit for bit.
+// SurfaceEvidence on the same quantised data, so they agree bit for bit —
+// unless the store is over its memory budget and has coarsened the view
+// (CompactDepthView::Coarsened, FusionOptions::store_budget_bytes).
 #include <Eigen/Core>
 #include <cstddef>
 #include <cstdint>
@@ -26,6 +28,10 @@ namespace lfrecon {
 //    whole ray through V is free;
 //  - background nearer than V's nearest point: it occludes all of V — kept as "none";
 //  - no depth (0) without a background label, or confidence <= 0: none.
+//
+// A coarsened view (block() > 1) keeps one Pixel per block x block pixels
+// (see Coarsened); at(row, col) then addresses blocks, and SurfaceEvidence
+// samples the block that contains a voxel's projection.
 class CompactDepthView {
  public:
   struct Pixel {
@@ -43,18 +49,39 @@ class CompactDepthView {
   int height() const { return view_.height; }
   double near_depth() const { return near_; }
   double far_depth() const { return far_; }
-  const Pixel& at(int row, int col) const { return pixels_[static_cast<std::size_t>(row) * view_.width + col]; }
+  // Pixels (block x block of the view's pixels each) per row and column of the stored grid.
+  int block() const { return block_; }
+  int grid_width() const { return grid_width_; }
+  int grid_height() const { return grid_height_; }
+  const Pixel& at(int row, int col) const { return pixels_[static_cast<std::size_t>(row) * grid_width_ + col]; }
   // Decoded depth (metres; +infinity for kBeyond, 0 for none) and confidence in [0, 1].
   double Depth(const Pixel& p) const;
   static double Confidence(const Pixel& p) { return p.confidence / 255.0; }
   static DepthLabel Label(const Pixel& p) { return static_cast<DepthLabel>(p.label); }
 
-  int CountForeground() const;
-  std::size_t MemoryBytes() const { return pixels_.size() * sizeof(Pixel) + sizeof(*this); }
+  int CountForeground() const;  // stored pixels (blocks when coarsened)
+  std::size_t MemoryBytes() const { return pixels_.capacity() * sizeof(Pixel) + sizeof(*this); }
+
+  // The same view with blocks of 2x2 stored pixels merged into one (block()
+  // doubles, memory / 4), for the store's memory budget. A merged block is
+  // conservative for free space, so thin features are not carved by it:
+  //  - any foreground pixel: foreground at the *nearest* foreground depth
+  //    (voxels in front of it are free, as they are for every pixel of the
+  //    block; voxels behind it within the band get eq. 11, deeper ones are
+  //    occluded), confidence the mean over the foreground pixels within
+  //    `band` (metres) of that depth;
+  //  - else any background pixel: background at the nearest background depth
+  //    (kBeyond only when all are), confidence their mean;
+  //  - else none.
+  // Cost: around silhouettes the object is dilated by up to a block (a voxel
+  // just outside it, at the surface's depth, gets positive evidence instead
+  // of free space), and depth within a block is its front-most one.
+  CompactDepthView Coarsened(double band) const;
 
  private:
   PinholeView view_;
   double near_ = 0, far_ = 0, step_ = 0;
+  int block_ = 1, grid_width_ = 0, grid_height_ = 0;
   std::vector<Pixel> pixels_;
 };
 

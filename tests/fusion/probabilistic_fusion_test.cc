@@ -247,6 +247,139 @@ TEST(ProbabilisticFusion, OrderIndependent) {
   EXPECT_GT(half.ExtractMesh().triangles.size(), 0u);
 }
 
+// H of every active voxel of `a`, compared with `b`: the largest and mean
+// |ΔH|, and how many voxels are on different sides of the threshold.
+struct HDiff {
+  double max = 0, mean = 0;
+  std::size_t voxels = 0, flipped = 0, missing = 0;
+};
+HDiff CompareH(const ProbabilisticFusion& a, const ProbabilisticFusion& b, double threshold) {
+  HDiff d;
+  a.ForEachVoxel([&](const Eigen::Vector3i& v, double sum, int n) {
+    const double ha = n > 0 ? std::exp(sum / n) : 0.0;
+    if (!b.IsActive(v)) ++d.missing;
+    const double hb = b.SurfaceProbability(v);
+    d.max = std::max(d.max, std::abs(ha - hb));
+    d.mean += std::abs(ha - hb);
+    d.flipped += (ha >= threshold) != (hb >= threshold);
+    ++d.voxels;
+  });
+  if (d.voxels > 0) d.mean /= d.voxels;
+  return d;
+}
+
+TEST(ProbabilisticFusion, StoreBudgetBoundsMemoryAndKeepsTheSurface) {
+  // 40 views of 160x90 (57.6 KB each stored exactly, 2.3 MB in all) under a
+  // 300 KB budget: most views end at 4x4 blocks (11 mm at the box, 4 mm voxels).
+  const synth::Scene scene = BoxScene();
+  const Rendered data = RenderAll(scene, testing::SphereRig(40, Eigen::Vector3d::Zero(), 0.6, 160, 90, 40));
+  FusionOptions options = OptionsFor(scene, 0.004);
+  options.store_budget_bytes = 0;
+  const ProbabilisticFusion exact = Fuse(options, data);
+  options.store_budget_bytes = 300 * 1000;
+  const ProbabilisticFusion budget = Fuse(options, data);
+  const FusionStats se = exact.Stats(), sb = budget.Stats();
+  EXPECT_EQ(se.store_coarsened_views, 0);
+  EXPECT_GT(se.store_bytes, 2000u * 1000u);
+  EXPECT_LE(sb.store_bytes, options.store_budget_bytes);
+  EXPECT_GE(sb.store_max_block, 4);
+  EXPECT_EQ(sb.active_voxels, se.active_voxels) << "activation never reads the store";
+  const HDiff d = CompareH(exact, budget, options.surface_threshold);
+  const TriangleMesh gt = synth::GroundTruthMesh(scene);
+  const double fe = Score(exact.ExtractMesh(), gt, nullptr, 0.004, scene.foreground_bbox()).scores[0].fscore;
+  const double fb = Score(budget.ExtractMesh(), gt, nullptr, 0.004, scene.foreground_bbox()).scores[0].fscore;
+  std::printf("budget: store %zu -> %zu bytes (%d views coarsened, blocks up to %d), %zu voxels: max |dH| %.3f, "
+              "mean %.4f, %zu flipped at the threshold; F@4mm %.4f exact, %.4f with the budget\n",
+              se.store_bytes, sb.store_bytes, sb.store_coarsened_views, sb.store_max_block, d.voxels, d.max, d.mean,
+              d.flipped, fe, fb);
+  EXPECT_EQ(d.missing, 0u);
+  EXPECT_LT(d.mean, 0.002);
+  EXPECT_LT(d.flipped, d.voxels / 1000);
+  EXPECT_GE(fb, fe - 0.01);
+  // Under a budget that holds everything, nothing changes at all.
+  options.store_budget_bytes = se.store_bytes + 1;
+  const ProbabilisticFusion roomy = Fuse(options, data);
+  EXPECT_EQ(roomy.Stats().store_coarsened_views, 0);
+  EXPECT_EQ(CompareH(exact, roomy, options.surface_threshold).max, 0.0);
+}
+
+TEST(ProbabilisticFusion, StoreBudgetKeepsThinFeatures) {
+  // A 4 mm rod with 2 mm voxels, its voxels activated late: in the first half
+  // of the views its depths are weak (c = 0.02, below the activation
+  // threshold, as dense maps' thin parts often are), so its voxels are
+  // back-filled from those views — coarsened to 4x4 blocks and more under a
+  // budget of 1/16 of the store. Blocks where the rod (2 px) meets background
+  // must stay foreground: were they background, those views would carve it.
+  synth::Scene scene("rod");
+  scene.set_foreground_bbox(Box({-0.02, -0.02, -0.06}, {0.02, 0.02, 0.06}));
+  scene.Add(synth::Primitive::Cylinder({0, 0, -0.05}, {0.0, 0.0, 0.05}, 0.002, synth::Material::Flat({0.9f, 0.9f, 0.9f}))
+                .Named("rod")
+                .Foreground());
+  testing::AddDome(&scene);
+  const double voxel = 0.002;
+  Rendered data = RenderAll(scene, testing::RingRig(12, {-25, 0, 25}, Eigen::Vector3d::Zero(), 0.25, 160, 90, 50));
+  for (std::size_t i = 0; i < data.depths.size() / 2; ++i) {
+    DepthMap& d = data.depths[i];
+    d.confidence.setTo(0.02f, d.label == static_cast<int>(DepthLabel::kForeground));
+  }
+  FusionOptions options = OptionsFor(scene, voxel);
+  options.activation_min_confidence = 0.05;
+  options.store_budget_bytes = 0;
+  const ProbabilisticFusion exact = Fuse(options, data);
+  options.store_budget_bytes = exact.Stats().store_bytes / 16;
+  const ProbabilisticFusion budget = Fuse(options, data);
+  EXPECT_LE(budget.Stats().store_bytes, options.store_budget_bytes);
+  EXPECT_GE(budget.Stats().store_max_block, 4);
+  const TriangleMesh thin = synth::GroundTruthMesh(scene, true);
+  const MeshMetrics me = Score(exact.ExtractMesh(), synth::GroundTruthMesh(scene), &thin, voxel, scene.foreground_bbox());
+  const MeshMetrics mb = Score(budget.ExtractMesh(), synth::GroundTruthMesh(scene), &thin, voxel, scene.foreground_bbox());
+  const HDiff d = CompareH(exact, budget, options.surface_threshold);
+  std::printf("rod with budget: P %.4f R %.4f thin %.4f (exact P %.4f R %.4f thin %.4f); max |dH| %.3f, mean %.4f, "
+              "%zu of %zu flipped\n",
+              mb.scores[0].precision, mb.scores[0].recall, mb.scores[0].thin_recall, me.scores[0].precision,
+              me.scores[0].recall, me.scores[0].thin_recall, d.max, d.mean, d.flipped, d.voxels);
+  EXPECT_GE(me.scores[0].thin_recall, 0.9);
+  EXPECT_GE(mb.scores[0].thin_recall, 0.9);
+  EXPECT_GE(mb.scores[0].precision, 0.9);
+  EXPECT_LT(d.flipped, d.voxels / 500);
+}
+
+TEST(ProbabilisticFusion, CoarsenedViewIsConservative) {
+  // Coarsening keeps a block's front-most foreground depth: a thin foreground
+  // column in front of background stays foreground at every level.
+  const PinholeView view = testing::LookAtView({0, -1, 0}, {0, 0, 0}, 64, 48, 40);
+  DepthMap d(48, 64);
+  for (int r = 0; r < 48; ++r)
+    for (int c = 0; c < 64; ++c) {
+      const bool rod = c == 33;
+      d.depth.at<float>(r, c) = rod ? 1.0f : 0.0f;  // background: nothing hit (sky)
+      d.confidence.at<float>(r, c) = 1.0f;
+      d.label.at<std::uint8_t>(r, c) =
+          static_cast<std::uint8_t>(rod ? DepthLabel::kForeground : DepthLabel::kBackground);
+    }
+  const BoundingBox volume = Box(Eigen::Vector3d::Constant(-0.2), Eigen::Vector3d::Constant(0.2));
+  CompactDepthView v(view, d, volume);
+  for (int level = 1; level <= 4; ++level) {
+    v = v.Coarsened(0.01);
+    ASSERT_EQ(v.block(), 1 << level);
+    const int col = 33 / v.block();
+    EXPECT_EQ(CompactDepthView::Label(v.at(0, col)), DepthLabel::kForeground);
+    EXPECT_NEAR(v.Depth(v.at(0, col)), 1.0, 1e-4);
+    EXPECT_EQ(v.at(0, col == 0 ? 1 : 0).depth, CompactDepthView::kBeyond);
+    EXPECT_EQ(v.grid_width(), (64 + v.block() - 1) / v.block());
+  }
+  FusionOptions fo;
+  fo.volume = volume;
+  fo.voxel_size = 0.004;
+  const SurfaceEvidence ev(v, fo);
+  float lp;
+  double c;
+  ASSERT_TRUE(ev.LogProbability(view.Unproject({33.5, 20.5}, 1.0), &lp, &c));
+  EXPECT_NEAR(c, 1.0, 1e-3);  // on the rod's surface
+  ASSERT_TRUE(ev.LogProbability(view.Unproject({5.5, 20.5}, 1.0), &lp, &c));
+  EXPECT_NEAR(c, -1.0, 1e-3);  // free space through the sky
+}
+
 TEST(ProbabilisticFusion, BackgroundRaysCarveFreeSpace) {
   // Nothing in V; view 0 claims a foreground patch (an outlier), the others see background through it.
   synth::Scene scene("empty");
