@@ -5,11 +5,14 @@
 
 #include <algorithm>
 #include <cmath>
+#include <deque>
 #include <fstream>
+#include <future>
 #include <sstream>
 
 #include "fusion/mesh_coloring.h"
 #include "io/ply.h"
+#include "refine/refine.h"
 #include "util/error.h"
 #include "util/progress.h"
 
@@ -59,6 +62,138 @@ Aggregator::Aggregator(const AggregatorOptions& options) : options_(options), st
 
 Aggregator::~Aggregator() = default;
 
+namespace {
+
+// The job's fusion grid, empty: V, voxel and σ_s as the embedded pipeline sets them.
+std::unique_ptr<ProbabilisticFusion> NewFusion(const JobGeometry& geo) {
+  const PipelineOptions& po = geo.options;
+  FusionOptions fo = po.fusion;
+  fo.volume = geo.volume;
+  fo.voxel_size = PipelineVoxelSize(geo.volume, po);
+  if (po.densify) fo.sigma_s = po.dense_sigma_s;
+  return std::make_unique<ProbabilisticFusion>(fo);
+}
+
+// `k` of `n` views evenly spread, as the embedded pipeline picks its colour and
+// carving frames over the views it processed (all of a job's).
+std::vector<int> EvenlySpread(int n, int k) {
+  std::vector<int> out;
+  k = std::min(k, n);
+  for (int c = 0; c < k; ++c) out.push_back(static_cast<int>(static_cast<std::size_t>(c) * n / k));
+  return out;
+}
+
+// The frames `ids` that are in the store (`frame_ok`), as ColorViews; `cache`
+// shares the pixels of frames read before.
+std::vector<ColorView> LoadColorViews(const JobStore& store, const JobGeometry& geo, const std::vector<int>& ids,
+                                      const std::vector<char>& frame_ok, std::map<int, cv::Mat>* cache) {
+  std::vector<ColorView> out;
+  for (int v : ids) {
+    if (!frame_ok[v]) continue;
+    auto it = cache->find(v);
+    if (it == cache->end()) it = cache->emplace(v, store.ReadFrame(geo.id, v, geo.views[v])).first;
+    out.push_back({geo.views[v], it->second, cv::Mat()});
+  }
+  return out;
+}
+
+// What a refined export needs, captured on the serving thread.
+struct RefineSnapshot {
+  std::string id;
+  bool complete = false;    // the job is DONE: its whole checkpoint, mesh_refined.ply cached
+  JobGeometry geo;          // running job (a finished one's is read from the store)
+  std::vector<char> fused;  // running job: the views fused so far
+  std::vector<char> frame_ok;
+};
+
+// The export reply of the refined mesh: the grid rebuilt from the checkpoint's
+// dense maps in view order (not fused.log's arrival order: the same sums up to
+// float rounding, and the same result whatever order the workers delivered,
+// so a finished job's export is reproducible), then what `lfrecon run` does after fusion (libs/pipeline/embedded_pipeline.cc):
+// RefineFusedSurface with `carving_views` evenly spread frames, the fused
+// iso-surface where Poisson made nothing, colour from `color_views` frames.
+pb::Envelope RefinedExportReply(const JobStore& store, RefineSnapshot snap) {
+  Timer total;
+  const fs::path dir = store.JobDir(snap.id);
+  const fs::path cached = dir / "mesh_refined.ply";
+  pb::Envelope out = NewEnvelope(snap.id);
+  pb::ExportReply* rep = out.mutable_export_reply();
+  rep->set_complete(snap.complete);
+  if (snap.complete && fs::exists(cached)) {
+    const TriangleMesh mesh = ReadPly(cached);
+    rep->set_ply(ReadFileBytes(cached));
+    rep->set_vertices(mesh.vertices.size());
+    rep->set_triangles(mesh.triangles.size());
+    if (auto st = store.ReadText(snap.id, "status.pb")) {
+      pb::JobStatus s;
+      if (s.ParseFromString(*st)) rep->set_views_fused(s.views_fused());
+    }
+    return out;
+  }
+  if (snap.complete) {  // the grid was released when the job ended: its checkpoint, every view
+    snap.geo = LoadJobGeometry(store, snap.id);
+    const int n = static_cast<int>(snap.geo.views.size());
+    snap.fused.assign(n, 0);
+    if (auto log = store.ReadText(snap.id, "fused.log")) {
+      std::istringstream ss(*log);
+      int v;
+      while (ss >> v)
+        if (v >= 0 && v < n) snap.fused[v] = 1;
+    }
+    snap.frame_ok.assign(n, 0);
+    for (int k = 0; k < n; ++k) snap.frame_ok[k] = store.HasFrame(snap.id, k);
+  }
+  const JobGeometry& geo = snap.geo;
+  const PipelineOptions& po = geo.options;
+  const int n = static_cast<int>(geo.views.size());
+  Timer tf;
+  std::unique_ptr<ProbabilisticFusion> fusion = NewFusion(geo);
+  int fused = 0;
+  for (int v = 0; v < n; ++v) {
+    if (!snap.fused[v]) continue;
+    if (StopRequested()) throw std::runtime_error("lfrecon-aggregate is stopping");
+    fusion->Integrate(geo.views[v], store.ReadMap(snap.id, pb::MAP_DENSE, v, geo.views[v]), v);
+    ++fused;
+  }
+  const double seconds_fusion = tf.Seconds();
+  TriangleMesh mesh;
+  RefineStats rs;
+  std::map<int, cv::Mat> frames;
+  if (fused > 0) {
+    const int kc = po.refine && po.refine_options.carve ? po.carving_views : 0;
+    const std::vector<ColorView> carve = LoadColorViews(store, geo, EvenlySpread(n, kc), snap.frame_ok, &frames);
+    if (po.refine) {
+      RefineResult refined = RefineFusedSurface(*fusion, carve, po.refine_options, po.meshing);
+      rs = refined.stats;
+      mesh = std::move(refined.mesh);
+    }
+    // Too few boundary voxels for Poisson: the fused surface rather than nothing (as lfrecon run).
+    if (mesh.triangles.empty()) mesh = fusion->ExtractMesh(po.meshing);
+  }
+  fusion.reset();
+  if (po.color_views > 0 && !mesh.triangles.empty()) {
+    const std::vector<ColorView> cviews =
+        LoadColorViews(store, geo, EvenlySpread(n, po.color_views), snap.frame_ok, &frames);
+    if (!cviews.empty()) ColorizeMesh(&mesh, cviews, po.coloring);
+  }
+  frames.clear();
+  const fs::path tmp = dir / ("export_refined_" + std::to_string(::getpid()) + ".ply");
+  WritePly(mesh, tmp);
+  rep->set_ply(ReadFileBytes(tmp));
+  if (snap.complete) fs::rename(tmp, cached);  // atomic: a reader sees all of it or nothing
+  else fs::remove(tmp);
+  rep->set_vertices(mesh.vertices.size());
+  rep->set_triangles(mesh.triangles.size());
+  rep->set_views_fused(fused);
+  spdlog::info("aggregate: job {}: refined export of {} fused views: {} triangles from {} carving views ({} carved), "
+               "{:.1f} s ({:.1f} re-fusing the checkpoint, {:.1f} refining)",
+               snap.id, fused, mesh.triangles.size(), rs.carving_views, rs.carved, total.Seconds(),
+               seconds_fusion, rs.seconds_total);
+  return out;
+}
+
+}  // namespace
+
 std::unique_ptr<Aggregator::Job> Aggregator::LoadJob(const std::string& id) {
   auto job = std::make_unique<Job>();
   job->id = id;
@@ -86,11 +221,7 @@ std::unique_ptr<Aggregator::Job> Aggregator::LoadJob(const std::string& id) {
   }
   job->ingest_done = store_.ReadText(id, "ingest.done").has_value();
   if (job->ingest_done) job->state = pb::STATE_RUNNING;
-  FusionOptions fo = po.fusion;
-  fo.volume = job->geo.volume;
-  fo.voxel_size = PipelineVoxelSize(job->geo.volume, po);
-  if (po.densify) fo.sigma_s = po.dense_sigma_s;
-  job->fusion = std::make_unique<ProbabilisticFusion>(fo);
+  job->fusion = NewFusion(job->geo);
   // Checkpoint: replay the fused views in their order, then any dense map
   // that was stored but not yet logged.
   int replayed = 0;
@@ -300,11 +431,37 @@ pb::Envelope Aggregator::HandleTaskResult(Job& job, const pb::TaskResult& r) {
   return ack;
 }
 
-pb::Envelope Aggregator::HandleExport(Job& job, const pb::ExportRequest& req) {
-  if (req.refine())
-    return ErrorEnvelope(pb::ERROR_NOT_IMPLEMENTED,
-                         "--refine (voxel carving and screened Poisson, §5 end) is not implemented in the service yet",
-                         job.id);
+Aggregator::Deferred Aggregator::RefinedExport(const Job& job) const {
+  RefineSnapshot snap;
+  snap.id = job.id;
+  snap.complete = job.state == pb::STATE_DONE;
+  if (!snap.complete) {
+    snap.geo = job.geo;
+    snap.fused = job.fused;
+    snap.frame_ok = job.frame_ok;
+  }
+  return [store = store_, snap = std::move(snap)]() -> pb::Envelope {
+    try {
+      return RefinedExportReply(store, snap);
+    } catch (const InputError& e) {
+      return ErrorEnvelope(pb::ERROR_INPUT, e.what(), snap.id);
+    } catch (const std::exception& e) {
+      spdlog::error("aggregate: job {}: refined export failed: {}", snap.id, e.what());
+      return ErrorEnvelope(pb::ERROR_INTERNAL, e.what(), snap.id);
+    }
+  };
+}
+
+pb::Envelope Aggregator::HandleExport(Job& job, const pb::ExportRequest& req, Deferred* deferred) {
+  if (req.refine()) {
+    if (job.state != pb::STATE_DONE && !job.fusion)
+      return ErrorEnvelope(pb::ERROR_BAD_REQUEST,
+                           "job " + job.id + " is " + pb::JobState_Name(job.state) + ": nothing to export", job.id);
+    Deferred work = RefinedExport(job);
+    if (!deferred) return work();
+    *deferred = std::move(work);
+    return pb::Envelope();
+  }
   pb::Envelope out = NewEnvelope(job.id);
   pb::ExportReply* rep = out.mutable_export_reply();
   const fs::path dir = store_.JobDir(job.id);
@@ -331,7 +488,9 @@ pb::Envelope Aggregator::HandleExport(Job& job, const pb::ExportRequest& req) {
   return out;
 }
 
-pb::Envelope Aggregator::Handle(const pb::Envelope& req) {
+pb::Envelope Aggregator::Handle(const pb::Envelope& req) { return Handle(req, nullptr); }
+
+pb::Envelope Aggregator::Handle(const pb::Envelope& req, Deferred* deferred) {
   try {
     switch (req.body_case()) {
       case pb::Envelope::kPing: {
@@ -358,7 +517,7 @@ pb::Envelope Aggregator::Handle(const pb::Envelope& req) {
         return out;
       }
       case pb::Envelope::kExportRequest:
-        return HandleExport(*job, req.export_request());
+        return HandleExport(*job, req.export_request(), deferred);
       case pb::Envelope::kCancel: {
         if (!job->Ended()) {
           store_.WriteText(job->id, "cancelled", "");
@@ -410,8 +569,24 @@ void Aggregator::Serve() {
   RouterServer server(context, options_.endpoint, options_.max_message_bytes);
   spdlog::info("aggregate: serving on {} (store {}, lease {} ms)", options_.endpoint, store_.root().string(),
                options_.lease_ms);
+  // Refined exports: run one at a time on another thread, in arrival order;
+  // each is answered when its work is done.
+  struct Pending {
+    RouterServer::Incoming in;
+    Deferred work;
+  };
+  std::deque<Pending> pending;
+  std::future<pb::Envelope> running;
+  auto reap = [&](bool wait) {
+    if (!running.valid()) return;
+    if (!wait && running.wait_for(std::chrono::seconds(0)) != std::future_status::ready) return;
+    server.Reply(pending.front().in, running.get());
+    pending.pop_front();
+  };
   while (!StopRequested()) {
-    auto in = server.Receive(std::chrono::milliseconds(200));
+    reap(false);
+    if (!running.valid() && !pending.empty()) running = std::async(std::launch::async, pending.front().work);
+    auto in = server.Receive(std::chrono::milliseconds(pending.empty() ? 200 : 20));
     if (!in) continue;
     pb::Envelope reply;
     if (!in->ok) {
@@ -419,10 +594,17 @@ void Aggregator::Serve() {
       reply = NewEnvelope();
       *reply.mutable_error() = in->error;
     } else {
-      reply = Handle(in->envelope);
+      Deferred work;
+      reply = Handle(in->envelope, &work);
+      if (work) {
+        pending.push_back({std::move(*in), std::move(work)});
+        continue;
+      }
     }
     server.Reply(*in, reply);
   }
+  reap(true);  // a refined export under way stops at its next view (or finishes refining) and is answered
+  for (Pending& p : pending) server.Reply(p.in, ErrorEnvelope(pb::ERROR_INTERNAL, "lfrecon-aggregate stopped", p.in.envelope.job_id()));
   spdlog::info("aggregate: stopped");
 }
 

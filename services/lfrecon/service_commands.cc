@@ -177,12 +177,17 @@ void AddServiceCommands(CLI::App& root, int* exit_code) {
     auto* cmd = root.add_subcommand("export", "Mesh of a service job (what is fused so far while it runs)");
     cmd->add_option("job", a->job, "Job id")->required();
     cmd->add_option("-o,--out", a->out, "Output PLY")->required();
-    cmd->add_flag("--refine", a->refine, "Voxel carving + screened Poisson (not implemented yet in the service)");
+    cmd->add_flag("--refine", a->refine,
+                  "The refined mesh (voxel carving + screened Poisson), as lfrecon run's mesh.ply; mid-stream, of "
+                  "the views fused so far. The aggregator re-fuses the job's stored depth maps for it (about the "
+                  "job's fusion time, plus the refinement) and keeps serving meanwhile; a finished job's is kept");
     AddEndpointFlags(cmd, &a->ep, false);
     cmd->callback([a, exit_code] {
       pb::Envelope req = svc::NewEnvelope(a->job);
       req.mutable_export_request()->set_refine(a->refine);
-      const pb::Envelope reply = Call(a->ep.aggregate, req, std::max(a->ep.timeout_ms, 120000));
+      // Waits at least 2 min, 30 min with --refine (a queued refinement waits for the one before it).
+      const int wait_ms = std::max(a->ep.timeout_ms, a->refine ? 1800000 : 120000);
+      const pb::Envelope reply = Call(a->ep.aggregate, req, wait_ms);
       const pb::ExportReply& r = reply.export_reply();
       if (!a->out.parent_path().empty()) fs::create_directories(a->out.parent_path());
       std::ofstream f(a->out, std::ios::binary);

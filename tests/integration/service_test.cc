@@ -108,8 +108,10 @@ struct Reference {
   fs::path dir, dataset;
   TriangleMesh gt;
   BoundingBox volume;
-  double f2 = 0, f4 = 0;  // F-score at 2 and 4 voxels of `lfrecon run`
+  double f2 = 0, f4 = 0;  // F-score at 2 and 4 voxels of `lfrecon run`'s fused mesh (mesh_raw.ply)
   std::size_t triangles = 0;
+  double refined_f2 = 0, refined_f4 = 0;  // of its refined mesh (mesh.ply: carving + screened Poisson)
+  std::size_t refined_triangles = 0;
   int views = 0;
 };
 Reference* g_ref = nullptr;
@@ -140,15 +142,22 @@ class ServiceTest : public ::testing::Test {
     g_ref->views = ds.NumViews();
     g_ref->volume = ds.bbox();
     g_ref->gt = ReadPly(g_ref->dataset / "gt_mesh.ply");
-    // The service does not refine (carving + Poisson) yet: its mesh is the fused
-    // iso-surface, which `lfrecon run` writes as mesh_raw.ply.
+    // The service's mesh (export) is the fused iso-surface, which `lfrecon run`
+    // writes as mesh_raw.ply; export --refine is its refined mesh.ply.
     const TriangleMesh run = ReadPly(g_ref->dir / "run" / "mesh_raw.ply");
     g_ref->triangles = run.triangles.size();
     const MeshMetrics m = Score(run);
     g_ref->f2 = m.scores[0].fscore;
     g_ref->f4 = m.scores[1].fscore;
-    std::printf("lfrecon run (mesh_raw): %zu triangles, F@%.0fmm %.4f, F@%.0fmm %.4f\n", g_ref->triangles, 2 * kVoxelMm,
-                g_ref->f2, 4 * kVoxelMm, g_ref->f4);
+    const TriangleMesh refined = ReadPly(g_ref->dir / "run" / "mesh.ply");
+    g_ref->refined_triangles = refined.triangles.size();
+    const MeshMetrics mr = Score(refined);
+    g_ref->refined_f2 = mr.scores[0].fscore;
+    g_ref->refined_f4 = mr.scores[1].fscore;
+    std::printf("lfrecon run: mesh_raw %zu triangles, F@%.0fmm %.4f, F@%.0fmm %.4f; mesh (refined) %zu triangles, "
+                "%.4f, %.4f\n",
+                g_ref->triangles, 2 * kVoxelMm, g_ref->f2, 4 * kVoxelMm, g_ref->f4, g_ref->refined_triangles,
+                g_ref->refined_f2, g_ref->refined_f4);
   }
   static void TearDownTestSuite() {
     fs::remove_all(g_ref->dir);
@@ -245,26 +254,33 @@ class ServiceTest : public ::testing::Test {
   pb::JobStatus WaitDone(const std::string& job) {
     return WaitUntil(job, [](const pb::JobStatus& s) { return s.state() == pb::STATE_DONE; });
   }
-  pb::ExportReply Export(const std::string& job, const fs::path& out) {
+  pb::ExportReply Export(const std::string& job, const fs::path& out, bool refine = false) {
     pb::Envelope req = NewEnvelope(job);
-    req.mutable_export_request();
+    req.mutable_export_request()->set_refine(refine);
     const pb::Envelope r = Ask(req, 60000);
     EXPECT_TRUE(r.has_export_reply()) << (r.has_error() ? r.error().message() : BodyName(r));
     std::ofstream(out, std::ios::binary) << r.export_reply().ply();
     return r.export_reply();
   }
-  // The final mesh through the CLI, scored against lfrecon run's.
-  void ExpectSameAsEmbedded(const std::string& job) {
-    const fs::path out = tmp_->path() / "final.ply";
-    RunCommand(kBin + "lfrecon -q export " + job + " --aggregate " + agg_ + " -o " + out.string());
+  // The final mesh through the CLI, scored against lfrecon run's: the fused one
+  // (mesh_raw.ply), or with `refine` the refined one (mesh.ply).
+  void ExpectSameAsEmbedded(const std::string& job, bool refine = false) {
+    const fs::path out = tmp_->path() / (refine ? "final_refined.ply" : "final.ply");
+    const auto t0 = std::chrono::steady_clock::now();
+    RunCommand(kBin + "lfrecon -q export " + job + (refine ? " --refine" : "") + " --aggregate " + agg_ + " -o " +
+               out.string());
+    const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     const TriangleMesh mesh = ReadPly(out);
     const MeshMetrics m = Score(mesh);
-    std::printf("service: %zu triangles, F@%.0fmm %.4f, F@%.0fmm %.4f (lfrecon run: %zu, %.4f, %.4f)\n",
-                mesh.triangles.size(), 2 * kVoxelMm, m.scores[0].fscore, 4 * kVoxelMm, m.scores[1].fscore,
-                g_ref->triangles, g_ref->f2, g_ref->f4);
-    EXPECT_GT(g_ref->f4, 0.5);  // the reference itself is a reconstruction
-    EXPECT_NEAR(m.scores[0].fscore, g_ref->f2, 1e-3);
-    EXPECT_NEAR(m.scores[1].fscore, g_ref->f4, 1e-3);
+    const double f2 = refine ? g_ref->refined_f2 : g_ref->f2, f4 = refine ? g_ref->refined_f4 : g_ref->f4;
+    std::printf("service%s: %zu triangles, F@%.0fmm %.4f, F@%.0fmm %.4f (lfrecon run %s: %zu, %.4f, %.4f); export "
+                "%.2f s\n",
+                refine ? " (export --refine)" : "", mesh.triangles.size(), 2 * kVoxelMm, m.scores[0].fscore,
+                4 * kVoxelMm, m.scores[1].fscore, refine ? "mesh.ply" : "mesh_raw.ply",
+                refine ? g_ref->refined_triangles : g_ref->triangles, f2, f4, seconds);
+    EXPECT_GT(f4, 0.5);  // the reference itself is a reconstruction
+    EXPECT_NEAR(m.scores[0].fscore, f2, 1e-3);
+    EXPECT_NEAR(m.scores[1].fscore, f4, 1e-3);
   }
 
   zmq::context_t context_{1};
@@ -285,10 +301,14 @@ TEST_F(ServiceTest, SubmittedJobOnSeparateProcessesEqualsEmbeddedRun) {
   // status and cancel through the CLI; a finished job stays DONE.
   const std::string st = RunCommand(kBin + "lfrecon status " + job + " --json --aggregate " + agg_);
   EXPECT_NE(st.find("\"DONE\""), std::string::npos) << st;
-  // --refine (carving + Poisson) is not implemented in the service: a clear error, not a fake.
-  pb::Envelope refine = NewEnvelope(job);
-  refine.mutable_export_request()->set_refine(true);
-  EXPECT_EQ(Ask(refine).error().code(), pb::ERROR_NOT_IMPLEMENTED);
+  // export --refine: carving + screened Poisson of the job's grid, rebuilt from
+  // its checkpoint, equals lfrecon run's mesh.ply; kept, so the next one is the same file.
+  ExpectSameAsEmbedded(job, true);
+  const pb::ExportReply again = Export(job, tmp_->path() / "again.ply", true);
+  EXPECT_TRUE(again.complete());
+  EXPECT_EQ(again.views_fused(), static_cast<unsigned>(g_ref->views));
+  EXPECT_EQ(again.ply(), ReadFileBytes(tmp_->path() / "final_refined.ply"));
+  EXPECT_TRUE(fs::exists(store_ / job / "mesh_refined.ply"));
   // Cancelling a finished job leaves it DONE.
   pb::Envelope cancel = NewEnvelope(job);
   cancel.mutable_cancel();
@@ -346,6 +366,19 @@ TEST_F(ServiceTest, FramesOutOfOrderAndDuplicatedAndExportMidStream) {
   EXPECT_EQ(m1.triangles.size(), e1.triangles());
   for (const auto& t : m1.triangles)
     for (int k = 0; k < 3; ++k) ASSERT_LT(static_cast<std::size_t>(t[k]), m1.vertices.size());
+  // Refined mid-stream: of the views fused when asked (the job keeps running meanwhile).
+  const auto t_refine = std::chrono::steady_clock::now();
+  const pb::ExportReply r1 = Export(job, tmp_->path() / "mid1_refined.ply", true);
+  const TriangleMesh mr1 = ReadPly(tmp_->path() / "mid1_refined.ply");
+  std::printf("mid-stream export --refine: %u views -> %zu triangles (%.2f s)\n", r1.views_fused(),
+              mr1.triangles.size(),
+              std::chrono::duration<double>(std::chrono::steady_clock::now() - t_refine).count());
+  EXPECT_FALSE(r1.complete());
+  EXPECT_GE(r1.views_fused(), e1.views_fused());
+  EXPECT_GT(mr1.triangles.size(), 100u);
+  EXPECT_EQ(mr1.triangles.size(), r1.triangles());
+  for (const auto& t : mr1.triangles)
+    for (int k = 0; k < 3; ++k) ASSERT_LT(static_cast<std::size_t>(t[k]), mr1.vertices.size());
   spool(n / 2, n);
   WaitUntil(job, [&](const pb::JobStatus& s) { return s.views_fused() >= e1.views_fused() + 30; });
   const pb::ExportReply e2 = Export(job, tmp_->path() / "mid2.ply");
