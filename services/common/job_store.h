@@ -11,6 +11,7 @@
 //   JOB/status.pb            JobStatus once the job has ended (done, failed, cancelled)
 //   JOB/cancelled            marker: ingest stops spooling
 //   JOB/mesh.ply, mesh_raw.ply, grid.vdb   final outputs
+//   JOB/mesh_refined.ply     refined mesh, written by the first `export --refine` of a finished job
 // Every file is written to a temporary name and renamed, so a reader (or a
 // restart after kill -9) never sees half a file.
 #include <filesystem>

@@ -178,9 +178,9 @@ void AddServiceCommands(CLI::App& root, int* exit_code) {
     cmd->add_option("job", a->job, "Job id")->required();
     cmd->add_option("-o,--out", a->out, "Output PLY")->required();
     cmd->add_flag("--refine", a->refine,
-                  "The refined mesh (voxel carving + screened Poisson), as lfrecon run's mesh.ply; mid-stream, of "
-                  "the views fused so far. The aggregator re-fuses the job's stored depth maps for it (about the "
-                  "job's fusion time, plus the refinement) and keeps serving meanwhile; a finished job's is kept");
+                  "Refined mesh (voxel carving + screened Poisson) as lfrecon run's mesh.ply; mid-stream, of the "
+                  "views fused so far. The aggregator first re-fuses the job's stored depth maps (about the job's "
+                  "fusion time) and keeps serving meanwhile; waits up to 30 min (or --timeout-ms)");
     AddEndpointFlags(cmd, &a->ep, false);
     cmd->callback([a, exit_code] {
       pb::Envelope req = svc::NewEnvelope(a->job);
