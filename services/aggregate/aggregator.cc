@@ -109,9 +109,10 @@ struct RefineSnapshot {
 // The export reply of the refined mesh: the grid rebuilt from the checkpoint's
 // dense maps in view order (not fused.log's arrival order: the same sums up to
 // float rounding, and the same result whatever order the workers delivered,
-// so a finished job's export is reproducible), then what `lfrecon run` does after fusion (libs/pipeline/embedded_pipeline.cc):
-// RefineFusedSurface with `carving_views` evenly spread frames, the fused
-// iso-surface where Poisson made nothing, colour from `color_views` frames.
+// so a finished job's export is reproducible), then what `lfrecon run` does
+// after fusion (libs/pipeline/embedded_pipeline.cc): RefineFusedSurface with
+// `carving_views` evenly spread frames, the fused iso-surface where Poisson
+// made nothing, colour from `color_views` frames.
 pb::Envelope RefinedExportReply(const JobStore& store, RefineSnapshot snap) {
   Timer total;
   const fs::path dir = store.JobDir(snap.id);
@@ -604,7 +605,8 @@ void Aggregator::Serve() {
     server.Reply(*in, reply);
   }
   reap(true);  // a refined export under way stops at its next view (or finishes refining) and is answered
-  for (Pending& p : pending) server.Reply(p.in, ErrorEnvelope(pb::ERROR_INTERNAL, "lfrecon-aggregate stopped", p.in.envelope.job_id()));
+  for (Pending& p : pending)
+    server.Reply(p.in, ErrorEnvelope(pb::ERROR_INTERNAL, "lfrecon-aggregate stopped", p.in.envelope.job_id()));
   spdlog::info("aggregate: stopped");
 }
 

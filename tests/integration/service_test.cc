@@ -417,6 +417,13 @@ TEST_F(ServiceTest, CancelStopsAJob) {
   EXPECT_EQ(Ask(cancel).job_status().state(), pb::STATE_CANCELLED);
   EXPECT_EQ(Status(job).state(), pb::STATE_CANCELLED);
   EXPECT_TRUE(store.ReadText(job, "cancelled").has_value());  // ingest stops at its next frame
+  for (bool refine : {false, true}) {  // nothing to export, refined or not: a clear error
+    pb::Envelope ex = NewEnvelope(job);
+    ex.mutable_export_request()->set_refine(refine);
+    const pb::Envelope r = Ask(ex);
+    EXPECT_EQ(r.error().code(), pb::ERROR_BAD_REQUEST) << r.error().message();
+    EXPECT_NE(r.error().message().find("CANCELLED"), std::string::npos) << r.error().message();
+  }
   pb::Envelope tr = NewEnvelope();
   tr.mutable_task_request()->set_stage(pb::STAGE_DEPTH);
   EXPECT_TRUE(Ask(tr).has_no_task());
