@@ -1,9 +1,10 @@
 // Fusion at scale: a long synthetic sequence streamed straight from the
 // generator (nothing on disk), with time per stage and memory as it grows.
 //
-//   scale_bench [--mode exact|pipeline] [--frames 3000] [--width 1280] [--height 720] [--scene tabletop]
+//   scale_bench [--mode exact|pipeline|maps] [--frames 3000] [--width 1280] [--height 720] [--scene tabletop]
 //               [--loops L] [--voxel-divisions 256] [--budget-mib 1024] [--max-block 16]
 //               [--report-every 250] [--threads N] [--eval] [--no-refine] [--mesh OUT.ply]
+//               [--compare-exact] [--budgets-mib 0,64,16] [DATASET DEPTH_OUT]   (maps mode)
 //
 // --mode exact (default): renders each frame's exact depth and labels
 //   (confidence 1, one sample per pixel, no image noise) and fuses it, as the
@@ -11,6 +12,13 @@
 //   resolution, without the per-view depth estimation (~8.6 s of CPU per 720p view).
 // --mode pipeline: the whole `lfrecon run` (EmbeddedPipeline: depth from
 //   gradients, filtering, densification, fusion, refinement) on rendered frames.
+// --mode maps DATASET DEPTH_OUT: fuses depth maps written by `lfrecon run
+//   --write-depth` (depth/<stem>.pfm, confidence/<stem>.pfm; foreground = inside V)
+//   as the pipeline does (σ_s 0.15, activation from c >= 0.01) once per budget
+//   of --budgets-mib (e.g. 0,64,16: 0 = exact) and scores each against the
+//   dataset's ground truth: the cost of the store budget on real dense maps.
+// --compare-exact (exact mode): also fuses every frame without a budget and
+//   compares H voxel by voxel and the F-scores at the end (memory: the whole store).
 // --budget-mib: FusionOptions::store_budget_bytes (0: unlimited); --loops: turns
 //   of the camera over the N frames (0: the scene's default, one turn).
 // Every --report-every frames it prints the cumulative seconds per stage, the
@@ -19,14 +27,20 @@
 #include <tbb/global_control.h>
 
 #include <cstdio>
+#include <algorithm>
 #include <cstdlib>
 #include <memory>
+#include <cmath>
+#include <filesystem>
 #include <optional>
+#include <sstream>
 #include <string>
 #include <vector>
 
 #include "eval/mesh_metrics.h"
 #include "fusion/probabilistic_fusion.h"
+#include "io/dataset.h"
+#include "io/depth_map_io.h"
 #include "io/ply.h"
 #include "pipeline/embedded_pipeline.h"
 #include "synth/renderer.h"
@@ -39,6 +53,81 @@ using namespace lfrecon;
 namespace {
 
 double MiB(double bytes) { return bytes / 1048576.0; }
+
+// --mode maps: one fusion per budget over maps on disk.
+int RunMaps(const std::string& dataset_dir, const std::string& depth_dir, const std::vector<double>& budgets_mib,
+            int max_block) {
+  namespace fs = std::filesystem;
+  DatasetOptions dopt;
+  dopt.dataset_dir = dataset_dir;
+  const Dataset ds = Dataset::Open(dopt);
+  const auto gt_path = ds.GroundTruthMeshPath(false);
+  const auto thin_path = ds.GroundTruthMeshPath(true);
+  if (!gt_path) {
+    std::fprintf(stderr, "%s has no ground-truth mesh\n", dataset_dir.c_str());
+    return 1;
+  }
+  const TriangleMesh gt = ReadPly(*gt_path);
+  TriangleMesh thin;
+  if (thin_path) thin = ReadPly(*thin_path);
+  std::vector<int> ids;
+  std::vector<DepthMap> maps;
+  for (int i = 0; i < ds.NumViews(); ++i) {
+    const std::string stem = fs::path(ds.views()[i].name).stem().string();
+    const fs::path d = fs::path(depth_dir) / "depth" / (stem + ".pfm");
+    const fs::path c = fs::path(depth_dir) / "confidence" / (stem + ".pfm");
+    if (!fs::exists(d)) continue;
+    DepthMap m;
+    m.depth = ReadPfm(d);
+    if (fs::exists(c)) m.confidence = ReadPfm(c);
+    ids.push_back(i);
+    maps.push_back(std::move(m));
+  }
+  const PipelineOptions po;
+  const double voxel = PipelineVoxelSize(ds.bbox(), po);
+  std::printf("%zu maps from %s, voxel %.2f mm, sigma_s %.2f, activation from c >= %.2f\n", maps.size(),
+              depth_dir.c_str(), voxel * 1000, po.dense_sigma_s, po.fusion.activation_min_confidence);
+  std::printf("%10s %9s %6s %8s %7s %7s %7s %7s %7s %7s %9s %9s %9s %8s %8s\n", "budget_MiB", "store_MiB", "block",
+              "coarse", "F@2", "F@5", "F@10", "P@5", "R@5", "thin@5", "active", "flipped", "mean|dH|", "fuse_s",
+              "backfill");
+  std::unique_ptr<ProbabilisticFusion> exact;
+  for (double b : budgets_mib) {
+    FusionOptions fo = po.fusion;
+    fo.volume = ds.bbox();
+    fo.voxel_size = voxel;
+    fo.sigma_s = po.dense_sigma_s;
+    fo.store_budget_bytes = static_cast<std::size_t>(b * 1048576.0);
+    fo.store_max_block = max_block;
+    auto fusion = std::make_unique<ProbabilisticFusion>(fo);
+    Timer t;
+    for (std::size_t k = 0; k < maps.size(); ++k) fusion->Integrate(ds.View(ids[k]), maps[k], ids[k]);
+    const double fuse_s = t.Seconds();
+    const TriangleMesh mesh = fusion->ExtractMesh();
+    MeshMetricsOptions mo;
+    mo.volume = ds.bbox();
+    const MeshMetrics m = EvaluateMesh(mesh, gt, thin_path ? &thin : nullptr, mo);
+    // H against the first (normally exact, budget 0) run.
+    std::size_t flipped = 0, n = 0;
+    double mean = 0;
+    if (exact) {
+      exact->ForEachVoxel([&](const Eigen::Vector3i& v, double sum, int views) {
+        const double he = views > 0 ? std::exp(sum / views) : 0.0, hb = fusion->SurfaceProbability(v);
+        flipped += (he >= fo.surface_threshold) != (hb >= fo.surface_threshold);
+        mean += std::abs(he - hb);
+        ++n;
+      });
+    }
+    const FusionStats s = fusion->Stats();
+    std::printf("%10.0f %9.1f %6d %8d %7.4f %7.4f %7.4f %7.4f %7.4f %7.4f %9zu %9zu %9.5f %8.1f %8.1f\n", b,
+                MiB(s.store_bytes), s.store_max_block, s.store_coarsened_views, m.scores[0].fscore,
+                m.scores[1].fscore, m.scores[2].fscore, m.scores[1].precision, m.scores[1].recall,
+                m.scores[1].thin_recall, s.active_voxels, flipped, n > 0 ? mean / n : 0.0, fuse_s, s.backfill_s);
+    std::fflush(stdout);
+    if (!exact) exact = std::move(fusion);
+  }
+  std::printf("peak RSS %.0f MiB\n", MiB(PeakRssBytes()));
+  return 0;
+}
 
 void PrintScores(const char* what, const TriangleMesh& mesh, const synth::SynthSequence& seq) {
   Timer t;
@@ -58,7 +147,9 @@ int main(int argc, char** argv) {
   std::string mode = "exact", scene = "tabletop", mesh_out;
   int frames = 3000, width = 1280, height = 720, divisions = 256, report_every = 250, threads = 0, max_block = 16;
   double loops = 0, budget_mib = 1024;
-  bool eval = false, refine = true;
+  bool eval = false, refine = true, compare = false;
+  std::vector<double> budgets = {0, 64, 16};
+  std::vector<std::string> positional;
   for (int a = 1; a < argc; ++a) {
     const std::string k = argv[a];
     auto value = [&]() -> std::string {
@@ -82,10 +173,27 @@ int main(int argc, char** argv) {
     else if (k == "--mesh") mesh_out = value();
     else if (k == "--eval") eval = true;
     else if (k == "--no-refine") refine = false;
+    else if (k == "--compare-exact") compare = true;
+    else if (k == "--budgets-mib") {
+      budgets.clear();
+      std::stringstream ss(value());
+      std::string item;
+      while (std::getline(ss, item, ',')) budgets.push_back(std::atof(item.c_str()));
+    } else if (k.rfind("--", 0) != 0) positional.push_back(k);
     else {
       std::fprintf(stderr, "unknown option %s (see the header of scale_bench.cc)\n", k.c_str());
       return 2;
     }
+  }
+  if (mode == "maps") {
+    if (positional.size() != 2) {
+      std::fprintf(stderr, "--mode maps needs DATASET DEPTH_OUT\n");
+      return 2;
+    }
+    spdlog::set_level(spdlog::level::warn);
+    std::optional<tbb::global_control> control;
+    if (threads > 0) control.emplace(tbb::global_control::max_allowed_parallelism, threads);
+    return RunMaps(positional[0], positional[1], budgets, max_block);
   }
   if ((mode != "exact" && mode != "pipeline") || frames < 1 || report_every < 1) {
     std::fprintf(stderr, "bad --mode / --frames / --report-every\n");
@@ -123,7 +231,13 @@ int main(int argc, char** argv) {
     fo.store_budget_bytes = budget;
     fo.store_max_block = max_block;
     ProbabilisticFusion fusion(fo);
-    double render_s = 0, fuse_s = 0;
+    std::unique_ptr<ProbabilisticFusion> exact;
+    if (compare) {
+      FusionOptions unlimited = fo;
+      unlimited.store_budget_bytes = 0;
+      exact = std::make_unique<ProbabilisticFusion>(unlimited);
+    }
+    double render_s = 0, fuse_s = 0, exact_s = 0;
     std::printf("%6s %8s %9s %9s %9s %9s %9s %9s %10s %8s %8s %6s %8s %8s\n", "frames", "wall_s", "render_s",
                 "fusion_s", "activate", "backfill", "update", "coarsen", "active", "grid_MiB", "store_MiB", "block",
                 "rss_MiB", "peak_MiB");
@@ -142,6 +256,11 @@ int main(int argc, char** argv) {
       t.Restart();
       fusion.Integrate(view, d, i);
       fuse_s += t.Seconds();
+      if (exact) {
+        t.Restart();
+        exact->Integrate(view, d, i);
+        exact_s += t.Seconds();
+      }
       if ((i + 1) % report_every == 0 || i + 1 == frames) {
         const FusionStats s = fusion.Stats();
         std::printf("%6d %8.1f %9.1f %9.1f %9.1f %9.1f %9.1f %9.1f %10zu %8.1f %9.1f %6d %8.0f %8.0f\n", i + 1,
@@ -166,6 +285,23 @@ int main(int argc, char** argv) {
     std::fflush(stdout);
     if (!mesh_out.empty()) WritePly(mesh, mesh_out);
     if (eval) PrintScores("fused", mesh, *seq);
+    if (exact) {
+      std::size_t flipped = 0, n = 0, missing = 0;
+      double mean = 0, max = 0;
+      exact->ForEachVoxel([&](const Eigen::Vector3i& v, double sum, int views) {
+        const double he = views > 0 ? std::exp(sum / views) : 0.0, hb = fusion.SurfaceProbability(v);
+        flipped += (he >= fo.surface_threshold) != (hb >= fo.surface_threshold);
+        missing += !fusion.IsActive(v);
+        mean += std::abs(he - hb);
+        max = std::max(max, std::abs(he - hb));
+        ++n;
+      });
+      std::printf("exact (no budget): fusion %.1f s, store %.1f MiB; against it, with the budget: %zu voxels, %zu "
+                  "missing, max |dH| %.4f, mean |dH| %.6f, %zu flipped at H = %.2f\n",
+                  exact_s, MiB(exact->Stats().store_bytes), n, missing, max, n > 0 ? mean / n : 0.0, flipped,
+                  fo.surface_threshold);
+      if (eval) PrintScores("fused, exact store", exact->ExtractMesh(), *seq);
+    }
     return 0;
   }
 
