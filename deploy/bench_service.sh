@@ -20,7 +20,8 @@ t0=$(date +%s.%N)
 t1=$(date +%s.%N)
 REF=$(python3 -c "
 import json; r=json.load(open('$TMP/embedded/report.json'))['seconds']; print(r.get('refine', 0.0))")
-# The service does not refine (carving + Poisson) yet: compare with run's time without its refine step.
+# The stack's job ends with the fused mesh (refinement is a separate `lfrecon export --refine`):
+# compare with run's time without its refine step.
 echo "lfrecon run: $(python3 -c "w=$t1-$t0; r=$REF; print('%.1f s wall, %.1f s refine, %.1f s without refine: %.2f frames/s'%(w, r, w-r, $N/(w-r)))"), peak RSS $(( $(cut -d" " -f1 "$TMP/run_rss") / 1024 )) MiB, CPU $(awk '{printf "%.1f", $2+$3}' "$TMP/run_rss") s (with refine), fused mesh (mesh_raw.ply) $(fscore "$TMP/embedded/mesh_raw.ply")"
 for W in "${WORKERS[@]}"; do
   export LFRECON_RUN="$TMP/run" LFRECON_BIN="$BIN"
