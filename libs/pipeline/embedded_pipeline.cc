@@ -33,6 +33,31 @@ void PipelineOptions::Check() const {
   if (refine) refine_options.Check();
   if (carving_views < 0) throw OptionError("carving_views must be >= 0");
   if (!(dense_sigma_s > 0)) throw OptionError("dense_sigma_s must be positive");
+  if (!(background_confidence_floor >= 0 && background_confidence_floor <= 1))
+    throw OptionError("background_confidence_floor must be in [0, 1]");
+}
+
+DepthMap WithBackgroundConfidenceFloor(const DepthMap& map, const PinholeView& view, const BoundingBox& volume,
+                                       double floor) {
+  DepthMap out;
+  out.depth = map.depth;
+  out.label = map.label;
+  out.confidence = map.confidence.empty() ? cv::Mat(map.depth.size(), CV_32F, cv::Scalar(1)) : map.confidence.clone();
+  if (!(floor > 0)) return out;
+  const bool labels = !map.label.empty();
+  const auto f = static_cast<float>(floor);
+  for (int r = 0; r < out.depth.rows; ++r) {
+    const float* d = out.depth.ptr<float>(r);
+    float* c = out.confidence.ptr<float>(r);
+    const std::uint8_t* l = labels ? out.label.ptr<std::uint8_t>(r) : nullptr;
+    for (int col = 0; col < out.depth.cols; ++col) {
+      if (!(d[col] > 0) || c[col] >= f) continue;
+      const bool background = labels ? l[col] == static_cast<std::uint8_t>(DepthLabel::kBackground)
+                                     : !volume.Contains(view.Unproject(Eigen::Vector2d(col + 0.5, r + 0.5), d[col]));
+      if (background) c[col] = f;
+    }
+  }
+  return out;
 }
 
 double PipelineVoxelSize(const BoundingBox& volume, const PipelineOptions& options) {
@@ -163,7 +188,13 @@ PipelineResult EmbeddedPipeline::Run(FrameSource& frames) {
         }
         st.fused_pixels += fused_map.CountValid();
         Timer t;
-        fusion.Integrate(views_[i], fused_map, i);
+        if (options_.densify && options_.background_confidence_floor > 0)
+          fusion.Integrate(views_[i],
+                           WithBackgroundConfidenceFloor(fused_map, views_[i], volume_,
+                                                         options_.background_confidence_floor),
+                           i);
+        else
+          fusion.Integrate(views_[i], fused_map, i);
         st.seconds_fusion += t.Seconds();
         if (write && options_.write_depth) {
           const std::string stem = names_.empty() ? DefaultStem(i) : fs::path(names_[i]).stem().string();
@@ -285,6 +316,8 @@ PipelineResult EmbeddedPipeline::Run(FrameSource& frames) {
         {"surface_threshold", mo.threshold < 0 ? fo.surface_threshold : mo.threshold},
         {"sigma_v", fo.sigma_v},
         {"sigma_s", fo.sigma_s},
+        {"background_confidence_floor", options_.densify ? options_.background_confidence_floor : 0.0},
+        {"activation_min_confidence", fo.activation_min_confidence},
         {"band", fo.band},
         {"free_space_margin", fo.free_space_margin},
         {"color_views", options_.color_views},
@@ -295,7 +328,7 @@ PipelineResult EmbeddedPipeline::Run(FrameSource& frames) {
           {"dt_sigma_spatial", po.dt_sigma_spatial},
           {"dt_sigma_color", po.dt_sigma_color}}},
         {"carving", options_.refine && options_.refine_options.carve && st.carving_frames > 0},
-        {"poisson", options_.refine},
+        {"poisson", options_.refine && options_.refine_options.use_poisson},
         {"consistency_threshold", options_.refine_options.carving.consistency_threshold},
         {"carving_rounds", options_.refine_options.carving.max_rounds}}},
   };

@@ -41,13 +41,17 @@ RefineResult RefineFusedSurface(const ProbabilisticFusion& fusion, const std::ve
   }
 
   Timer tp;
-  const OrientedPoints points = BoundaryPoints(grid);
-  PoissonStats ps;
-  BoundingBox v = fusion.options().volume;
-  result.mesh = ScreenedPoissonSurface(points, grid.voxel_size(), options.poisson, v, &ps);
+  if (options.use_poisson) {
+    const OrientedPoints points = BoundaryPoints(grid);
+    PoissonStats ps;
+    BoundingBox v = fusion.options().volume;
+    result.mesh = ScreenedPoissonSurface(points, grid.voxel_size(), options.poisson, v, &ps);
+    st.poisson_points = ps.points;
+    st.poisson_depth = ps.depth;
+  } else {
+    result.mesh = grid.ExtractMesh();
+  }
   st.seconds_poisson = tp.Seconds();
-  st.poisson_points = ps.points;
-  st.poisson_depth = ps.depth;
   st.mesh_vertices = result.mesh.vertices.size();
   st.mesh_triangles = result.mesh.triangles.size();
   st.seconds_total = total.Seconds();
