@@ -4,11 +4,15 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <atomic>
 #include <cmath>
+#include <condition_variable>
 #include <deque>
 #include <fstream>
 #include <future>
+#include <mutex>
 #include <sstream>
+#include <thread>
 
 #include "fusion/mesh_coloring.h"
 #include "io/ply.h"
@@ -25,17 +29,35 @@ struct Aggregator::Job {
   std::string message;
   Clock::time_point created = Clock::now();
   pb::JobStatus final_status;  // for jobs that ended (loaded from status.pb)
-  // Running jobs only:
-  JobGeometry geo;
+  // Running jobs only. The serving thread's:
+  bool active = false;  // running: the fusion thread is up, results are taken
+  JobGeometry geo;      // constant once loaded (the fusion thread reads it too)
   int n = 0;
   ViewGraph near, wide, photo;
-  std::vector<char> frame_ok, sparse_ok, dense_ok, fused;
-  int frames_spooled = 0, sparse_done = 0, dense_done = 0, views_fused = 0;
+  std::vector<char> frame_ok, sparse_ok, dense_ok;
+  int frames_spooled = 0, sparse_done = 0, dense_done = 0;  // dense_done: maps received (stored)
   bool ingest_done = false;
-  std::unique_ptr<ProbabilisticFusion> fusion;
   std::map<std::pair<int, int>, std::pair<Clock::time_point, std::string>> leases;  // (stage, view) -> deadline, worker
   int leases_expired = 0;
+  // Shared with the job's fusion thread:
+  std::mutex grid_mu;  // held while a view is integrated and while an export extracts its mesh
+  std::unique_ptr<ProbabilisticFusion> fusion;  // guarded by grid_mu; released when the thread stops
+  std::mutex queue_mu;                          // guards queue, fused (and stop's changes, for the wait)
+  std::condition_variable queue_cv;
+  std::deque<std::pair<int, bool>> queue;  // (view, append to fused.log): stored dense maps to fuse, in order
+  std::atomic<bool> stop{false};
+  std::vector<char> fused;
+  std::atomic<int> views_fused{0};  // changes under grid_mu (with the grid)
+  std::atomic<std::uint64_t> active_voxels{0};
+  enum Outcome { kFusing = 0, kFinished = 1, kFailed = 2 };
+  std::atomic<int> outcome{kFusing};  // kFinished: every view fused, outputs written
+  std::string fusion_error;           // kFailed: why (written before outcome)
+  std::uint32_t triangles = 0;        // kFinished: of mesh.ply (written before outcome)
+  double seconds_outputs = 0;
+  int replay = 0;  // views queued from the checkpoint when loaded
+  std::thread thread;
 
+  ~Job() { StopFusion(*this, true); }
   bool Ended() const {
     return state == pb::STATE_DONE || state == pb::STATE_FAILED || state == pb::STATE_CANCELLED;
   }
@@ -60,7 +82,10 @@ Aggregator::Aggregator(const AggregatorOptions& options) : options_(options), st
   }
 }
 
-Aggregator::~Aggregator() = default;
+Aggregator::~Aggregator() {
+  for (auto& [id, job] : jobs_) StopFusion(*job, false);  // all stop together
+  jobs_.clear();                                           // joins them
+}
 
 namespace {
 
@@ -193,6 +218,17 @@ pb::Envelope RefinedExportReply(const JobStore& store, RefineSnapshot snap) {
   return out;
 }
 
+// The fused mesh with colour from the embedded pipeline's colour frames
+// (color_views evenly spread over the views), those of `frame_ok` read from the store.
+void ColourMesh(const JobStore& store, const JobGeometry& geo, const std::vector<char>& frame_ok, TriangleMesh* mesh) {
+  const PipelineOptions& po = geo.options;
+  if (po.color_views <= 0 || mesh->triangles.empty()) return;
+  std::map<int, cv::Mat> frames;
+  const int n = static_cast<int>(geo.views.size());
+  const std::vector<ColorView> cviews = LoadColorViews(store, geo, EvenlySpread(n, po.color_views), frame_ok, &frames);
+  if (!cviews.empty()) ColorizeMesh(mesh, cviews, po.coloring);
+}
+
 }  // namespace
 
 std::unique_ptr<Aggregator::Job> Aggregator::LoadJob(const std::string& id) {
@@ -223,33 +259,39 @@ std::unique_ptr<Aggregator::Job> Aggregator::LoadJob(const std::string& id) {
   job->ingest_done = store_.ReadText(id, "ingest.done").has_value();
   if (job->ingest_done) job->state = pb::STATE_RUNNING;
   job->fusion = NewFusion(job->geo);
-  // Checkpoint: replay the fused views in their order, then any dense map
-  // that was stored but not yet logged.
-  int replayed = 0;
-  Timer timer;
+  job->active = true;
+  // Checkpoint: the fusion thread replays the fused views in their order,
+  // then fuses (and logs) any dense map that was stored but not yet logged.
   if (auto log = store_.ReadText(id, "fused.log")) {
     std::istringstream ss(*log);
     int v;
     while (ss >> v)
-      if (v >= 0 && v < n && !job->fused[v] && store_.HasMap(id, pb::MAP_DENSE, v)) {
-        Integrate(*job, v, store_.ReadMap(id, pb::MAP_DENSE, v, job->geo.views[v]), false);
-        ++replayed;
+      if (v >= 0 && v < n && !job->dense_ok[v] && store_.HasMap(id, pb::MAP_DENSE, v)) {
+        Enqueue(*job, v, false);
+        ++job->replay;
       }
   }
+  int unlogged = 0;
   for (int v = 0; v < n; ++v)
-    if (!job->fused[v] && store_.HasMap(id, pb::MAP_DENSE, v))
-      Integrate(*job, v, store_.ReadMap(id, pb::MAP_DENSE, v, job->geo.views[v]), true);
-  if (store_.ReadText(id, "cancelled")) job->state = pb::STATE_CANCELLED;
-  spdlog::info("aggregate: job {} loaded: {} views, {} frames, {} sparse, {} fused ({} replayed from the checkpoint in "
-               "{:.1f} s)",
-               id, n, job->frames_spooled, job->sparse_done, job->views_fused, replayed, timer.Seconds());
-  MaybeFinish(*job);
+    if (!job->dense_ok[v] && store_.HasMap(id, pb::MAP_DENSE, v)) Enqueue(*job, v, true), ++unlogged;
+  spdlog::info("aggregate: job {} loaded: {} views, {} frames, {} sparse, {} dense maps to fuse ({} from fused.log, "
+               "{} stored after it)",
+               id, n, job->frames_spooled, job->sparse_done, job->dense_done, job->replay, unlogged);
+  if (store_.ReadText(id, "cancelled")) {  // cancelled, then stopped before status.pb was written
+    EndJob(*job, pb::STATE_CANCELLED, "cancelled by the user");
+    job->fusion.reset();
+    return job;
+  }
+  job->thread = std::thread(&Aggregator::FusionLoop, this, job.get());
   return job;
 }
 
 Aggregator::Job* Aggregator::FindJob(const std::string& id) {
   const auto it = jobs_.find(id);
-  if (it != jobs_.end()) return it->second.get();
+  if (it != jobs_.end()) {
+    Reap(*it->second);
+    return it->second.get();
+  }
   if (!store_.Exists(id)) return nullptr;
   auto job = LoadJob(id);
   Job* p = job.get();
@@ -257,17 +299,111 @@ Aggregator::Job* Aggregator::FindJob(const std::string& id) {
   return p;
 }
 
-void Aggregator::Integrate(Job& job, int view, const DepthMap& map, bool log) {
+// Serving thread: the dense map of `view` is in the store; it is fused after those queued before it.
+void Aggregator::Enqueue(Job& job, int view, bool log) const {
   if (!job.dense_ok[view]) job.dense_ok[view] = 1, ++job.dense_done;
-  if (job.fused[view]) return;
-  job.fusion->Integrate(job.geo.views[view], map, view);
-  job.fused[view] = 1;
-  ++job.views_fused;
-  if (log) store_.AppendLine(job.id, "fused.log", std::to_string(view));
+  {
+    std::lock_guard<std::mutex> lk(job.queue_mu);
+    job.queue.emplace_back(view, log);
+  }
+  job.queue_cv.notify_one();
+}
+
+void Aggregator::StopFusion(Job& job, bool join) {
+  {
+    std::lock_guard<std::mutex> lk(job.queue_mu);
+    job.stop = true;
+  }
+  job.queue_cv.notify_all();
+  if (join && job.thread.joinable()) job.thread.join();
+}
+
+void Aggregator::FusionLoop(Job* jp) const {
+  Job& job = *jp;
+  const std::string& id = job.id;
+  const PipelineOptions& po = job.geo.options;
+  Timer replay_timer;
+  int done = 0;
+  try {
+    for (;;) {
+      std::pair<int, bool> item;
+      {
+        std::unique_lock<std::mutex> lk(job.queue_mu);
+        // A signal cannot notify: look at StopRequested() now and then.
+        while (!job.stop && !StopRequested() && (job.queue.empty() || job.outcome != Job::kFusing))
+          job.queue_cv.wait_for(lk, std::chrono::milliseconds(200));
+        if (job.stop || StopRequested()) break;
+        item = job.queue.front();
+        job.queue.pop_front();
+        if (job.fused[item.first]) continue;
+      }
+      const int v = item.first;
+      const DepthMap map = store_.ReadMap(id, pb::MAP_DENSE, v, job.geo.views[v]);
+      {
+        std::lock_guard<std::mutex> grid(job.grid_mu);
+        job.fusion->Integrate(job.geo.views[v], map, v);
+        for (int slept = 0; slept < options_.fusion_delay_ms && !job.stop && !StopRequested(); slept += 10)
+          std::this_thread::sleep_for(std::chrono::milliseconds(10));  // fault injection (tests)
+        job.active_voxels = job.fusion->Stats().active_voxels;
+        if (item.second) store_.AppendLine(id, "fused.log", std::to_string(v));  // before anyone sees it fused
+        {
+          std::lock_guard<std::mutex> lk(job.queue_mu);
+          job.fused[v] = 1;
+        }
+        ++job.views_fused;
+      }
+      if (++done == job.replay && job.replay > 0)
+        spdlog::info("aggregate: job {}: {} views replayed from the checkpoint in {:.1f} s", id, job.replay,
+                     replay_timer.Seconds());
+      if (job.views_fused < job.n) continue;
+      // Every view fused: the job's outputs. The grid is complete and no other
+      // thread changes it, so exports may read it meanwhile.
+      Timer t;
+      const fs::path dir = store_.JobDir(id);
+      std::vector<char> frame_ok(job.n, 0);
+      for (int k = 0; k < job.n; ++k) frame_ok[k] = store_.HasFrame(id, k);
+      const TriangleMesh raw = job.fusion->ExtractMesh(po.meshing);
+      WritePly(raw, dir / "mesh_raw.ply");
+      TriangleMesh mesh = raw;
+      ColourMesh(store_, job.geo, frame_ok, &mesh);
+      WritePly(mesh, dir / "mesh.ply");
+      if (po.write_vdb) job.fusion->WriteVdb(dir / "grid.vdb");
+      job.triangles = static_cast<std::uint32_t>(mesh.triangles.size());
+      job.seconds_outputs = t.Seconds();
+      job.outcome = Job::kFinished;  // the serving thread marks the job DONE (Reap)
+    }
+  } catch (const std::exception& e) {
+    job.fusion_error = e.what();
+    job.outcome = Job::kFailed;
+    spdlog::error("aggregate: job {}: fusion failed: {}", id, e.what());
+  }
+  std::size_t left;
+  {
+    std::lock_guard<std::mutex> lk(job.queue_mu);
+    left = job.queue.size();
+  }
+  {
+    std::lock_guard<std::mutex> grid(job.grid_mu);
+    job.fusion.reset();  // the grid's memory goes back; what is not fused yet is in the store
+  }
+  spdlog::info("aggregate: job {}: fusion thread stopped, {} views fused{}", id, job.views_fused.load(),
+               left ? ", " + std::to_string(left) + " stored maps not fused (a restart fuses them)" : "");
+}
+
+void Aggregator::Reap(Job& job) {
+  if (!job.active) return;
+  const int outcome = job.outcome;
+  if (outcome == Job::kFailed) {
+    EndJob(job, pb::STATE_FAILED, "fusion: " + job.fusion_error);
+  } else if (outcome == Job::kFinished) {
+    spdlog::info("aggregate: job {}: {} views fused, mesh {} triangles ({:.1f} s)", job.id, job.views_fused.load(),
+                 job.triangles, job.seconds_outputs);
+    EndJob(job, pb::STATE_DONE, "");
+  }
 }
 
 pb::JobStatus Aggregator::Status(const Job& job) const {
-  if (job.Ended() && !job.fusion && job.final_status.state() != pb::STATE_UNKNOWN) return job.final_status;
+  if (!job.active && job.final_status.state() != pb::STATE_UNKNOWN) return job.final_status;
   pb::JobStatus s;
   s.set_state(job.state);
   s.set_num_views(job.n);
@@ -277,8 +413,9 @@ pb::JobStatus Aggregator::Status(const Job& job) const {
   s.set_views_fused(job.views_fused);
   s.set_message(job.message);
   s.set_seconds(std::chrono::duration<double>(Clock::now() - job.created).count());
-  if (job.fusion) s.set_active_voxels(static_cast<std::uint32_t>(job.fusion->Stats().active_voxels));
+  s.set_active_voxels(static_cast<std::uint32_t>(job.active_voxels));
   s.set_leases_expired(job.leases_expired);
+  if (job.state == pb::STATE_DONE) s.set_triangles(job.triangles);
   return s;
 }
 
@@ -287,45 +424,11 @@ void Aggregator::EndJob(Job& job, pb::JobState state, const std::string& message
   job.message = message;
   job.leases.clear();
   job.final_status = Status(job);
+  job.active = false;
+  StopFusion(job, false);  // it stops after the view it is integrating, and releases the grid
   store_.WriteText(job.id, "status.pb", job.final_status.SerializeAsString());
-  job.fusion.reset();  // the grid's memory goes back; outputs are in the store
   if (state == pb::STATE_FAILED) spdlog::error("aggregate: job {} failed: {}", job.id, message);
   else spdlog::info("aggregate: job {} {}", job.id, pb::JobState_Name(state));
-}
-
-TriangleMesh Aggregator::CurrentMesh(Job& job, bool colour) {
-  const PipelineOptions& po = job.geo.options;
-  TriangleMesh mesh = job.fusion->ExtractMesh(po.meshing);
-  if (!colour || po.color_views <= 0 || mesh.triangles.empty()) return mesh;
-  // The frames the embedded pipeline colours from: color_views evenly spread over the views.
-  std::vector<ColorView> cviews;
-  const int k = std::min(po.color_views, job.n);
-  for (int c = 0; c < k; ++c) {
-    const int v = static_cast<int>(static_cast<std::size_t>(c) * job.n / k);
-    if (!job.frame_ok[v]) continue;
-    cviews.push_back({job.geo.views[v], store_.ReadFrame(job.id, v, job.geo.views[v]), cv::Mat()});
-  }
-  if (!cviews.empty()) ColorizeMesh(&mesh, cviews, po.coloring);
-  return mesh;
-}
-
-void Aggregator::MaybeFinish(Job& job) {
-  if (job.Ended() || !job.fusion || job.views_fused < job.n) return;
-  Timer t;
-  const fs::path dir = store_.JobDir(job.id);
-  TriangleMesh raw = job.fusion->ExtractMesh(job.geo.options.meshing);
-  WritePly(raw, dir / "mesh_raw.ply");
-  const TriangleMesh mesh = CurrentMesh(job, true);
-  WritePly(mesh, dir / "mesh.ply");
-  if (job.geo.options.write_vdb) job.fusion->WriteVdb(dir / "grid.vdb");
-  pb::JobStatus s = Status(job);
-  spdlog::info("aggregate: job {}: {} views fused, mesh {} triangles ({:.1f} s)", job.id, job.views_fused,
-               mesh.triangles.size(), t.Seconds());
-  job.state = pb::STATE_DONE;
-  EndJob(job, pb::STATE_DONE, "");
-  job.final_status.set_triangles(static_cast<std::uint32_t>(mesh.triangles.size()));
-  job.final_status.set_active_voxels(s.active_voxels());
-  store_.WriteText(job.id, "status.pb", job.final_status.SerializeAsString());
 }
 
 void Aggregator::ExpireLeases(Job& job) {
@@ -349,7 +452,7 @@ pb::Envelope Aggregator::HandleTaskRequest(const pb::Envelope& req) {
     return ErrorEnvelope(pb::ERROR_BAD_REQUEST, "unknown stage " + std::to_string(stage));
   for (auto& [id, jp] : jobs_) {
     Job& job = *jp;
-    if (job.Ended() || !job.fusion) continue;
+    if (!job.active) continue;
     ExpireLeases(job);
     for (int v = 0; v < job.n; ++v) {
       if (job.leases.count({stage, v})) continue;
@@ -387,7 +490,7 @@ pb::Envelope Aggregator::HandleTaskRequest(const pb::Envelope& req) {
 
 pb::Envelope Aggregator::HandleTaskResult(Job& job, const pb::TaskResult& r) {
   const int v = static_cast<int>(r.view());
-  if (job.Ended() || !job.fusion) {  // cancelled or failed meanwhile: nothing to do
+  if (!job.active) {  // ended meanwhile (cancelled, failed, done): nothing to do
     pb::Envelope ack = NewEnvelope(job.id);
     ack.mutable_ack();
     return ack;
@@ -422,9 +525,9 @@ pb::Envelope Aggregator::HandleTaskResult(Job& job, const pb::TaskResult& r) {
     if (!job.dense_ok[v]) {
       pb::DepthMap stored = r.map();
       stored.set_kind(pb::MAP_DENSE);  // the map that is fused, whatever the stage made
+      // In the store (the checkpoint) before the ack: a restart fuses it if the fusion thread did not.
       store_.WriteMap(job.id, stored);
-      Integrate(job, v, map, true);
-      MaybeFinish(job);
+      Enqueue(job, v, true);
     }
   }
   pb::Envelope ack = NewEnvelope(job.id);
@@ -432,13 +535,16 @@ pb::Envelope Aggregator::HandleTaskResult(Job& job, const pb::TaskResult& r) {
   return ack;
 }
 
-Aggregator::Deferred Aggregator::RefinedExport(const Job& job) const {
+Aggregator::Work Aggregator::RefinedExport(const Job& job) const {
   RefineSnapshot snap;
   snap.id = job.id;
   snap.complete = job.state == pb::STATE_DONE;
   if (!snap.complete) {
     snap.geo = job.geo;
-    snap.fused = job.fused;
+    {
+      std::lock_guard<std::mutex> lk(const_cast<Job&>(job).queue_mu);
+      snap.fused = job.fused;
+    }
     snap.frame_ok = job.frame_ok;
   }
   return [store = store_, snap = std::move(snap)]() -> pb::Envelope {
@@ -453,40 +559,69 @@ Aggregator::Deferred Aggregator::RefinedExport(const Job& job) const {
   };
 }
 
+// The mesh of what is fused so far: extracted under the grid's lock (whole
+// views only), coloured after it. A finished job's is mesh.ply.
+Aggregator::Work Aggregator::PlainExport(Job& job) const {
+  const bool done = job.state == pb::STATE_DONE;
+  return [store = store_, job = &job, done, views_fused = job.final_status.views_fused(),
+          frame_ok = done ? std::vector<char>() : job.frame_ok]() mutable -> pb::Envelope {
+    const std::string& id = job->id;
+    try {
+      pb::Envelope out = NewEnvelope(id);
+      pb::ExportReply* rep = out.mutable_export_reply();
+      const fs::path dir = store.JobDir(id);
+      TriangleMesh mesh;
+      bool complete = done;
+      if (!done) {
+        std::unique_lock<std::mutex> grid(job->grid_mu);
+        if (!job->fusion) {  // the job ended meanwhile and its grid is gone
+          grid.unlock();
+          pb::JobStatus s;
+          if (auto st = store.ReadText(id, "status.pb")) s.ParseFromString(*st);
+          if (s.state() != pb::STATE_DONE)
+            return ErrorEnvelope(pb::ERROR_BAD_REQUEST,
+                                 "job " + id + " is " + pb::JobState_Name(s.state()) + ": nothing to export", id);
+          complete = true, views_fused = s.views_fused();
+        } else {
+          mesh = job->fusion->ExtractMesh(job->geo.options.meshing);
+          views_fused = job->views_fused;
+          complete = job->outcome == Job::kFinished;
+        }
+      }
+      if (complete && mesh.triangles.empty() && fs::exists(dir / "mesh.ply")) {
+        mesh = ReadPly(dir / "mesh.ply");
+        rep->set_ply(ReadFileBytes(dir / "mesh.ply"));
+      } else {
+        ColourMesh(store, job->geo, frame_ok, &mesh);
+        const fs::path tmp = dir / ("export_" + std::to_string(::getpid()) + "_" +
+                                    std::to_string(std::hash<std::thread::id>()(std::this_thread::get_id())) + ".ply");
+        WritePly(mesh, tmp);
+        rep->set_ply(ReadFileBytes(tmp));
+        fs::remove(tmp);
+      }
+      rep->set_vertices(mesh.vertices.size());
+      rep->set_triangles(mesh.triangles.size());
+      rep->set_views_fused(views_fused);
+      rep->set_complete(complete);
+      return out;
+    } catch (const InputError& e) {
+      return ErrorEnvelope(pb::ERROR_INPUT, e.what(), id);
+    } catch (const std::exception& e) {
+      spdlog::error("aggregate: job {}: export failed: {}", id, e.what());
+      return ErrorEnvelope(pb::ERROR_INTERNAL, e.what(), id);
+    }
+  };
+}
+
 pb::Envelope Aggregator::HandleExport(Job& job, const pb::ExportRequest& req, Deferred* deferred) {
-  if (req.refine()) {
-    if (job.state != pb::STATE_DONE && !job.fusion)
-      return ErrorEnvelope(pb::ERROR_BAD_REQUEST,
-                           "job " + job.id + " is " + pb::JobState_Name(job.state) + ": nothing to export", job.id);
-    Deferred work = RefinedExport(job);
-    if (!deferred) return work();
-    *deferred = std::move(work);
-    return pb::Envelope();
-  }
-  pb::Envelope out = NewEnvelope(job.id);
-  pb::ExportReply* rep = out.mutable_export_reply();
-  const fs::path dir = store_.JobDir(job.id);
-  if (job.state == pb::STATE_DONE) {
-    const TriangleMesh mesh = ReadPly(dir / "mesh.ply");
-    rep->set_ply(ReadFileBytes(dir / "mesh.ply"));
-    rep->set_vertices(mesh.vertices.size());
-    rep->set_triangles(mesh.triangles.size());
-    rep->set_views_fused(job.final_status.views_fused());
-    rep->set_complete(true);
-    return out;
-  }
-  if (!job.fusion) return ErrorEnvelope(pb::ERROR_BAD_REQUEST, "job " + job.id + " is " + pb::JobState_Name(job.state) +
-                                                                   ": nothing to export", job.id);
-  const TriangleMesh mesh = CurrentMesh(job, true);
-  const fs::path tmp = dir / ("export_" + std::to_string(::getpid()) + ".ply");
-  WritePly(mesh, tmp);
-  rep->set_ply(ReadFileBytes(tmp));
-  fs::remove(tmp);
-  rep->set_vertices(mesh.vertices.size());
-  rep->set_triangles(mesh.triangles.size());
-  rep->set_views_fused(job.views_fused);
-  rep->set_complete(false);
-  return out;
+  if (job.state != pb::STATE_DONE && !job.active)
+    return ErrorEnvelope(pb::ERROR_BAD_REQUEST,
+                         "job " + job.id + " is " + pb::JobState_Name(job.state) + ": nothing to export", job.id);
+  Work work = req.refine() ? RefinedExport(job) : PlainExport(job);
+  if (!deferred) return work();
+  deferred->work = std::move(work);
+  deferred->lane = req.refine() ? Lane::kRefine : Lane::kExport;
+  return pb::Envelope();
 }
 
 pb::Envelope Aggregator::Handle(const pb::Envelope& req) { return Handle(req, nullptr); }
@@ -534,7 +669,7 @@ pb::Envelope Aggregator::Handle(const pb::Envelope& req, Deferred* deferred) {
         return ack;  // FindJob loaded it
       case pb::Envelope::kFrameSpooled: {
         const int k = static_cast<int>(req.frame_spooled().index());
-        if (job->Ended() || !job->fusion) return ack;
+        if (!job->active) return ack;
         if (k < 0 || k >= job->n) return ErrorEnvelope(pb::ERROR_BAD_REQUEST, "frame " + std::to_string(k) + " out of range", job->id);
         if (!store_.HasFrame(job->id, k))
           return ErrorEnvelope(pb::ERROR_BAD_REQUEST, "frame " + std::to_string(k) + " is not in the job store", job->id);
@@ -542,7 +677,7 @@ pb::Envelope Aggregator::Handle(const pb::Envelope& req, Deferred* deferred) {
         return ack;
       }
       case pb::Envelope::kIngestDone:
-        if (job->Ended() || !job->fusion) return ack;
+        if (!job->active) return ack;
         job->ingest_done = true;
         if (job->state == pb::STATE_INGESTING) job->state = pb::STATE_RUNNING;
         for (int k = 0; k < job->n; ++k)  // frames whose notice was lost
@@ -570,24 +705,32 @@ void Aggregator::Serve() {
   RouterServer server(context, options_.endpoint, options_.max_message_bytes);
   spdlog::info("aggregate: serving on {} (store {}, lease {} ms)", options_.endpoint, store_.root().string(),
                options_.lease_ms);
-  // Refined exports: run one at a time on another thread, in arrival order;
-  // each is answered when its work is done.
+  // Exports run off this thread, one at a time per lane (plain, refined), in
+  // arrival order; each is answered when its work is done.
   struct Pending {
     RouterServer::Incoming in;
-    Deferred work;
+    Work work;
   };
-  std::deque<Pending> pending;
-  std::future<pb::Envelope> running;
-  auto reap = [&](bool wait) {
-    if (!running.valid()) return;
-    if (!wait && running.wait_for(std::chrono::seconds(0)) != std::future_status::ready) return;
-    server.Reply(pending.front().in, running.get());
-    pending.pop_front();
+  struct LaneQueue {
+    std::deque<Pending> pending;
+    std::future<pb::Envelope> running;
+  };
+  LaneQueue lanes[2];
+  auto reap = [&](LaneQueue& q, bool wait) {
+    if (!q.running.valid()) return;
+    if (!wait && q.running.wait_for(std::chrono::seconds(0)) != std::future_status::ready) return;
+    server.Reply(q.pending.front().in, q.running.get());
+    q.pending.pop_front();
   };
   while (!StopRequested()) {
-    reap(false);
-    if (!running.valid() && !pending.empty()) running = std::async(std::launch::async, pending.front().work);
-    auto in = server.Receive(std::chrono::milliseconds(pending.empty() ? 200 : 20));
+    bool busy = false;
+    for (LaneQueue& q : lanes) {
+      reap(q, false);
+      if (!q.running.valid() && !q.pending.empty()) q.running = std::async(std::launch::async, q.pending.front().work);
+      busy = busy || !q.pending.empty();
+    }
+    for (auto& [id, job] : jobs_) Reap(*job);  // fusion finished (outputs written) or failed
+    auto in = server.Receive(std::chrono::milliseconds(busy ? 20 : 200));
     if (!in) continue;
     pb::Envelope reply;
     if (!in->ok) {
@@ -595,18 +738,25 @@ void Aggregator::Serve() {
       reply = NewEnvelope();
       *reply.mutable_error() = in->error;
     } else {
-      Deferred work;
-      reply = Handle(in->envelope, &work);
-      if (work) {
-        pending.push_back({std::move(*in), std::move(work)});
+      Deferred deferred;
+      reply = Handle(in->envelope, &deferred);
+      if (deferred.work) {
+        lanes[deferred.lane == Lane::kRefine ? 1 : 0].pending.push_back({std::move(*in), std::move(deferred.work)});
         continue;
       }
     }
     server.Reply(*in, reply);
   }
-  reap(true);  // a refined export under way stops at its next view (or finishes refining) and is answered
-  for (Pending& p : pending)
-    server.Reply(p.in, ErrorEnvelope(pb::ERROR_INTERNAL, "lfrecon-aggregate stopped", p.in.envelope.job_id()));
+  // The fusion threads stop after the view each is integrating (what is queued
+  // stays in the store for a restart); an export under way is answered (a
+  // refined one stops at its next view or finishes refining), queued ones get an error.
+  for (auto& [id, job] : jobs_) StopFusion(*job, false);
+  for (LaneQueue& q : lanes) {
+    reap(q, true);
+    for (Pending& p : q.pending)
+      server.Reply(p.in, ErrorEnvelope(pb::ERROR_INTERNAL, "lfrecon-aggregate stopped", p.in.envelope.job_id()));
+  }
+  for (auto& [id, job] : jobs_) StopFusion(*job, true);
   spdlog::info("aggregate: stopped");
 }
 

@@ -5,20 +5,27 @@
 //    within 15° and frames within 5° for propagate). A lease not returned in
 //    time (worker killed, stuck) expires and the view is handed out again;
 //    duplicate results are ignored.
-//  * Fuses each dense map into the job's ProbabilisticFusion (OpenVDB) as it
-//    arrives, in any order (§5 is order independent), after spooling it to the
-//    store and before appending its id to fused.log: the store's dense maps
-//    and fused.log are the checkpoint. A restarted aggregator replays them in
-//    fused.log order (the same sums in the same order: the same grid) and the
-//    job continues.
-//  * Answers status, export (mesh of what is fused so far, also mid-stream)
-//    and cancel at any time.
+//  * Acknowledges a dense map once it is written to the store, and fuses it
+//    into the job's ProbabilisticFusion (OpenVDB) on the job's own fusion
+//    thread, in the order the maps were received (§5 is order independent),
+//    appending its id to fused.log after it is integrated: the store's dense
+//    maps and fused.log are the checkpoint. A restarted aggregator replays
+//    them (fused.log order, then the stored maps not logged yet in view
+//    order) on that thread and the job continues; it answers meanwhile.
+//    Status reports the maps received (dense_done) and fused (views_fused).
+//    When the last view is fused, that thread writes mesh_raw.ply, mesh.ply
+//    (and grid.vdb); the job is DONE once they are written. Cancel, a failure
+//    and SIGTERM stop the thread after the view it is integrating.
+//  * Answers status, export (mesh of what is fused so far, also mid-stream:
+//    extracted under the grid's lock, so never of half a view) and cancel at
+//    any time: nothing on the serving thread waits for fusion. A plain export
+//    is computed off the serving thread (one at a time, others queue).
 //  * Export with refine (voxel carving + screened Poisson, libs/refine, as
 //    `lfrecon run` makes mesh.ply) runs off the serving thread, one at a time
 //    (others wait in a queue), so the daemon keeps leasing, fusing and
 //    answering meanwhile. It refines a private grid rebuilt from the
-//    checkpoint (the dense maps in fused.log order, the same grid as the
-//    live one): for a job still running, of the views fused when the request
+//    checkpoint (the fused views' dense maps in view order: the live grid up
+//    to float rounding): for a job still running, of the views fused when the request
 //    came; for a finished job (whose grid was released), of all of them. The
 //    carving and colour frames are read from the store for that export only.
 //    A finished job's refined mesh is kept as mesh_refined.ply and served
@@ -29,6 +36,7 @@
 #include <map>
 #include <memory>
 #include <string>
+#include <vector>
 
 #include "common/job_store.h"
 #include "common/messaging.h"
@@ -43,6 +51,9 @@ struct AggregatorOptions {
   std::int64_t max_message_bytes = kDefaultMaxMessageBytes;
   int lease_ms = 60000;  // a view task not returned within this is re-issued
   int retry_ms = 20;     // a worker with nothing to do asks again after this
+  // Fault injection for the integration tests: each view's integration holds
+  // the grid this much longer (slow fusion, as a big grid has). 0: off.
+  int fusion_delay_ms = 0;
 };
 
 class Aggregator {
@@ -51,30 +62,41 @@ class Aggregator {
   ~Aggregator();
   // Serves until StopRequested().
   void Serve();
-  // One request -> its reply (never throws). A refine export is computed here,
-  // in the caller's thread; Serve() computes it off the serving thread.
+  // One request -> its reply (never throws). An export is computed here, in
+  // the caller's thread; Serve() computes it off the serving thread. Fusion
+  // runs on the jobs' threads either way.
   pb::Envelope Handle(const pb::Envelope& request);
 
  private:
   struct Job;
   using Clock = std::chrono::steady_clock;
-  // Work whose reply is computed off the serving thread; it only reads the job
-  // store and what it captured (never the Aggregator), and never throws.
-  using Deferred = std::function<pb::Envelope()>;
+  // Work whose reply is computed off the serving thread; it reads the job
+  // store, what it captured and (plain export) the job's grid under its lock,
+  // never the serving thread's state; it never throws.
+  using Work = std::function<pb::Envelope()>;
+  enum class Lane { kExport, kRefine };  // each lane runs one at a time, in arrival order
+  struct Deferred {
+    Work work;
+    Lane lane = Lane::kExport;
+  };
   // `deferred` null: everything is answered here; else a request whose work
-  // can run elsewhere sets *deferred and the returned envelope is meaningless.
+  // can run elsewhere sets deferred->work and the returned envelope is meaningless.
   pb::Envelope Handle(const pb::Envelope& request, Deferred* deferred);
   Job* FindJob(const std::string& id);  // loads from the store on first use; nullptr if unknown
   std::unique_ptr<Job> LoadJob(const std::string& id);
   pb::Envelope HandleTaskRequest(const pb::Envelope& req);
   pb::Envelope HandleTaskResult(Job& job, const pb::TaskResult& result);
   pb::Envelope HandleExport(Job& job, const pb::ExportRequest& req, Deferred* deferred);
-  Deferred RefinedExport(const Job& job) const;
-  void Integrate(Job& job, int view, const DepthMap& map, bool log);
-  void MaybeFinish(Job& job);
+  Work RefinedExport(const Job& job) const;
+  Work PlainExport(Job& job) const;
+  // Fusion thread of a job: integrates the queued views until stopped.
+  void FusionLoop(Job* job) const;
+  void Enqueue(Job& job, int view, bool log) const;
+  static void StopFusion(Job& job, bool join);
+  // Serving thread: a job whose fusion thread finished (outputs written) or failed ends here.
+  void Reap(Job& job);
   void EndJob(Job& job, pb::JobState state, const std::string& message);
   pb::JobStatus Status(const Job& job) const;
-  TriangleMesh CurrentMesh(Job& job, bool colour);
   void ExpireLeases(Job& job);
 
   AggregatorOptions options_;

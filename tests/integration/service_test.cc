@@ -463,11 +463,120 @@ TEST_F(ServiceTest, AggregatorRestartResumesFromCheckpoint) {
   EXPECT_GE(logged, static_cast<int>(before.views_fused()));
   StartAggregator();
   client_ = std::make_unique<RequestClient>(context_, agg_);
-  const pb::JobStatus after = Status(job);  // resumed: what was fused is still fused
-  EXPECT_GE(after.views_fused(), static_cast<unsigned>(logged));
+  // Resumed: every stored map counts as received at once; what was fused is fused again (replayed in the background).
+  const pb::JobStatus after = Status(job);
+  EXPECT_GE(after.dense_done(), static_cast<unsigned>(logged));
   EXPECT_NE(after.state(), pb::STATE_DONE);
+  WaitUntil(job, [&](const pb::JobStatus& s) { return s.views_fused() >= static_cast<unsigned>(logged); });
   WaitDone(job);
   ExpectSameAsEmbedded(job);
+}
+
+// Milliseconds of one status request (fails the test if unanswered).
+double TimedStatus(RequestClient& client, const std::string& job, pb::JobStatus* status) {
+  pb::Envelope req = NewEnvelope(job);
+  req.mutable_status();
+  const auto t0 = std::chrono::steady_clock::now();
+  const auto r = client.Request(req, milliseconds(10000));
+  const double ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+  EXPECT_TRUE(r && r->has_job_status()) << "no status reply";
+  if (r && r->has_job_status()) *status = r->job_status();
+  return ms;
+}
+
+// Dense maps in the store and views in fused.log.
+std::pair<int, int> StoredAndLogged(const fs::path& store_dir, const std::string& job, int views) {
+  JobStore store(store_dir);
+  int stored = 0;
+  for (int v = 0; v < views; ++v) stored += store.HasMap(job, pb::MAP_DENSE, v);
+  const auto log = store.ReadText(job, "fused.log");
+  return {stored, log ? static_cast<int>(std::count(log->begin(), log->end(), '\n')) : 0};
+}
+
+// Slow fusion (--fusion-delay-ms: each view holds the grid 1.5 s longer, as a
+// big grid's integration takes): the serving thread never waits for it, so
+// status is answered in milliseconds while received maps queue for fusion (the
+// aggregator used to fuse on its serving thread: every status waited >= 1.5 s).
+// A mid-stream export waits for the view being integrated (never half a view).
+// SIGTERM stops the fusion thread after its view, the maps not fused yet stay
+// in the store, and a restarted aggregator fuses them: lfrecon run's mesh.
+TEST_F(ServiceTest, StatusAnsweredWhileFusingAndStopMidQueue) {
+  Process* agg = StartAggregator({"--fusion-delay-ms", "1500"});
+  StartIngest();
+  StartWorker("lfrecon-depth");
+  StartWorker("lfrecon-propagate");
+  const std::string job = Submit();
+  WaitUntil(job, [](const pb::JobStatus& s) { return s.views_fused() >= 3; });
+  std::vector<double> ms;
+  int fusing = 0;
+  for (int i = 0; i < 10; ++i) {
+    pb::JobStatus s;
+    ms.push_back(TimedStatus(*client_, job, &s));
+    fusing += s.dense_done() > s.views_fused();  // received maps wait: the fusion thread is busy
+    std::this_thread::sleep_for(milliseconds(150));
+  }
+  std::sort(ms.begin(), ms.end());
+  std::printf("status while fusing (1.5 s per view): median %.1f ms, worst %.1f ms of %zu\n", ms[ms.size() / 2],
+              ms.back(), ms.size());
+  EXPECT_EQ(fusing, 10);
+  EXPECT_LT(ms.back(), 500.0);
+  // Export mid-stream: the views fused when it got the grid.
+  const pb::JobStatus s0 = Status(job);
+  const pb::ExportReply e = Export(job, tmp_->path() / "mid.ply");
+  const pb::JobStatus s1 = Status(job);
+  EXPECT_FALSE(e.complete());
+  EXPECT_GE(e.views_fused(), s0.views_fused());
+  EXPECT_LE(e.views_fused(), s1.views_fused());
+  EXPECT_EQ(ReadPly(tmp_->path() / "mid.ply").triangles.size(), e.triangles());
+  // SIGTERM mid-queue: a clean exit after the view under way.
+  const auto t_stop = std::chrono::steady_clock::now();
+  EXPECT_EQ(agg->Stop(), 0);
+  std::printf("aggregator stopped in %.2f s\n",
+              std::chrono::duration<double>(std::chrono::steady_clock::now() - t_stop).count());
+  const auto [stored, logged] = StoredAndLogged(store_, job, g_ref->views);
+  EXPECT_LT(logged, stored);  // acknowledged maps not fused yet: in the store
+  StartAggregator();
+  client_ = std::make_unique<RequestClient>(context_, agg_);
+  pb::Envelope ping = NewEnvelope();
+  ping.mutable_ping();
+  EXPECT_TRUE(Ask(ping).has_pong());  // up (the process start is not timed)
+  pb::JobStatus after;
+  EXPECT_LT(TimedStatus(*client_, job, &after), 500.0);  // answered at once, the checkpoint replays meanwhile
+  EXPECT_GE(after.dense_done(), static_cast<unsigned>(stored));
+  const pb::JobStatus done = WaitDone(job);
+  EXPECT_EQ(done.views_fused(), static_cast<unsigned>(g_ref->views));
+  EXPECT_EQ(StoredAndLogged(store_, job, g_ref->views).second, g_ref->views);  // each view logged once
+  ExpectSameAsEmbedded(job);
+}
+
+// Cancel while views wait for fusion: answered at once, the fusion thread
+// stops after the view it is integrating, nothing more is fused.
+TEST_F(ServiceTest, CancelWhileFusing) {
+  Process* agg = StartAggregator({"--fusion-delay-ms", "1500"});
+  StartIngest();
+  StartWorker("lfrecon-depth");
+  StartWorker("lfrecon-propagate");
+  const std::string job = Submit();
+  WaitUntil(job, [](const pb::JobStatus& s) { return s.views_fused() >= 2; });
+  pb::Envelope cancel = NewEnvelope(job);
+  cancel.mutable_cancel();
+  const auto t0 = std::chrono::steady_clock::now();
+  const pb::Envelope r = Ask(cancel);
+  const double ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+  EXPECT_EQ(r.job_status().state(), pb::STATE_CANCELLED);
+  EXPECT_GT(r.job_status().dense_done(), r.job_status().views_fused());  // maps were waiting for fusion
+  EXPECT_LT(ms, 500.0);
+  std::this_thread::sleep_for(milliseconds(2000));  // the view under way: its delay stops at the cancel
+  const int logged = StoredAndLogged(store_, job, g_ref->views).second;
+  EXPECT_LE(logged, static_cast<int>(r.job_status().views_fused()) + 1);
+  std::this_thread::sleep_for(milliseconds(1500));
+  EXPECT_EQ(StoredAndLogged(store_, job, g_ref->views).second, logged);  // stopped
+  EXPECT_EQ(Status(job).state(), pb::STATE_CANCELLED);
+  pb::Envelope ex = NewEnvelope(job);
+  ex.mutable_export_request();
+  EXPECT_EQ(Ask(ex).error().code(), pb::ERROR_BAD_REQUEST);
+  EXPECT_EQ(agg->Stop(), 0);
+  EXPECT_NE(Tail(agg->log(), 100000).find("fusion thread stopped"), std::string::npos);
 }
 
 TEST_F(ServiceTest, BadMessagesGetErrorRepliesAndDaemonsKeepServing) {
