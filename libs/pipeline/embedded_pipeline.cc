@@ -318,6 +318,7 @@ PipelineResult EmbeddedPipeline::Run(FrameSource& frames) {
         {"sigma_s", fo.sigma_s},
         {"background_confidence_floor", options_.densify ? options_.background_confidence_floor : 0.0},
         {"activation_min_confidence", fo.activation_min_confidence},
+        {"probability_clamp", fo.probability_clamp},
         {"band", fo.band},
         {"free_space_margin", fo.free_space_margin},
         {"color_views", options_.color_views},

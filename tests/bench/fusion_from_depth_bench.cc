@@ -408,6 +408,7 @@ int main(int argc, char** argv) {
   fs::path keep_dir, mesh_file;
   double min_conf = 0.01, band = -1, margin = -1e9, bg_floor = 0;
   std::vector<double> thresholds = {-1};
+  std::vector<double> clamps = {FusionOptions{}.probability_clamp};
   int carving_views = 24;
   std::vector<int> min_views_list = {1};
   bool refine = false, analyze = false;
@@ -433,6 +434,11 @@ int main(int argc, char** argv) {
       std::stringstream ss(v);
       std::string item;
       while (std::getline(ss, item, ',')) thresholds.push_back(std::atof(item.c_str()));
+    } else if (k == "--probability-clamp") {  // a list: one fusion each
+      clamps.clear();
+      std::stringstream ss(v);
+      std::string item;
+      while (std::getline(ss, item, ',')) clamps.push_back(std::atof(item.c_str()));
     } else if (k == "--bg-confidence-floor") {
       bg_floor = std::atof(v.c_str());
     } else if (k == "--band") {
@@ -585,8 +591,11 @@ int main(int argc, char** argv) {
   std::printf("voxel %.3f mm, prune every %d, activation min confidence %.3f\n", voxel * 1000, prune_every,
               min_conf);
   std::printf("sigma_s  mesh     F@2    F@5    F@10   P@5    R@5    thin@2 thin@5 thin@10  triangles  active  fuse_s\n");
-  for (double s : sigmas) {
+  for (double s : sigmas)
+  for (double clamp : clamps) {
+    std::printf("probability clamp %g\n", clamp);
     FusionOptions fo;
+    fo.probability_clamp = clamp;
     fo.volume = ds.bbox();
     fo.voxel_size = voxel;
     fo.sigma_s = s;
