@@ -30,6 +30,90 @@ void GradientDepthOptions::Check() const {
   LFRECON_CHECK_OPTION(max_reference_points >= 2);
   LFRECON_CHECK_OPTION(presmooth_sigma >= 0 && presmooth_sigma <= 5);
   LFRECON_CHECK_OPTION(level_angle_ratio >= 1.0);
+  LFRECON_CHECK_OPTION(level_min_step_deg >= 0 && level_min_step_deg < max_view_angle_deg);
+}
+
+namespace {
+double AngleDeg(const Eigen::Vector3d& a, const Eigen::Vector3d& b) {
+  return std::acos(std::clamp(a.dot(b), -1.0, 1.0)) * 180.0 / M_PI;
+}
+}  // namespace
+
+std::vector<char> HierarchyGrid(const std::vector<PinholeView>& views, const GradientDepthOptions& o) {
+  std::vector<char> grid(views.size(), 1);
+  if (!o.use_hierarchy || !(o.level_min_step_deg > 0) || views.empty()) return grid;
+  Eigen::Vector3d last = views[0].ViewingDirection();
+  for (size_t k = 1; k < views.size(); ++k) {
+    const Eigen::Vector3d d = views[k].ViewingDirection();
+    grid[k] = AngleDeg(d, last) >= o.level_min_step_deg;
+    if (grid[k]) last = d;
+  }
+  return grid;
+}
+
+std::vector<int> SelectHierarchyViews(const PinholeView& vi, const std::vector<const PinholeView*>& neighbors,
+                                      const std::vector<char>& on_grid, const GradientDepthOptions& o) {
+  struct Cand {
+    int index;
+    double angle;
+    Eigen::Vector3d baseline, dir;
+  };
+  const Eigen::Vector3d dir_i = vi.ViewingDirection();
+  std::vector<Cand> pairs;
+  for (size_t q = 0; q < neighbors.size(); ++q) {
+    if (!neighbors[q]) continue;
+    const Eigen::Vector3d dir = neighbors[q]->ViewingDirection();
+    const double angle = AngleDeg(dir_i, dir);
+    if (angle > o.max_view_angle_deg) continue;
+    const Eigen::Vector3d baseline = neighbors[q]->Center() - vi.Center();
+    if (baseline.norm() < 1e-9) continue;  // coincident camera: no parallax
+    pairs.push_back({static_cast<int>(q), angle, baseline, dir});
+  }
+  std::sort(pairs.begin(), pairs.end(), [](const Cand& x, const Cand& y) {
+    return x.angle < y.angle || (x.angle == y.angle && x.index < y.index);
+  });
+  std::vector<int> order;
+  if (pairs.empty()) return order;
+  // First level: the nearest view, and the nearest one on the other side of it.
+  const Eigen::Vector3d b0 = pairs[0].baseline;
+  auto side_of = [&](const Cand& c) { return c.baseline.dot(b0) < 0 ? 1 : 0; };
+  std::vector<size_t> first_level = {0};
+  for (size_t k = 1; k < pairs.size(); ++k)
+    if (side_of(pairs[k])) {
+      first_level.push_back(k);
+      break;
+    }
+  for (size_t f : first_level) order.push_back(pairs[f].index);
+  if (!o.use_hierarchy) return order;
+  // Later levels, nearest first. On each side a view is used when it is on
+  // the grid, its angle is at least level_angle_ratio times the last used
+  // one's and it lies at least level_min_step_deg from it (the farthest grid
+  // view always is): far views carry nearly all the depth information, and
+  // one step keeps the prediction within the ±1 px search.
+  const bool thin = o.level_min_step_deg > 0;
+  auto grid = [&](const Cand& c) { return !thin || on_grid.empty() || on_grid[c.index]; };
+  double last_angle[2] = {0, 0};
+  Eigen::Vector3d last_dir[2] = {dir_i, dir_i};
+  for (size_t f : first_level) {
+    last_angle[side_of(pairs[f])] = pairs[f].angle;
+    last_dir[side_of(pairs[f])] = pairs[f].dir;
+  }
+  int farthest[2] = {-1, -1};
+  for (size_t k = 0; k < pairs.size(); ++k)
+    if (grid(pairs[k]) && std::find(first_level.begin(), first_level.end(), k) == first_level.end())
+      farthest[side_of(pairs[k])] = static_cast<int>(k);
+  for (size_t k = 0; k < pairs.size(); ++k) {
+    if (std::find(first_level.begin(), first_level.end(), k) != first_level.end() || !grid(pairs[k])) continue;
+    const int side = side_of(pairs[k]);
+    const bool far_enough = pairs[k].angle >= o.level_angle_ratio * last_angle[side] &&
+                            (!thin || AngleDeg(pairs[k].dir, last_dir[side]) >= o.level_min_step_deg);
+    if (far_enough || static_cast<int>(k) == farthest[side]) {
+      order.push_back(pairs[k].index);
+      last_angle[side] = pairs[k].angle;
+      last_dir[side] = pairs[k].dir;
+    }
+  }
+  return order;
 }
 
 void PrepareViewImage(ViewImage* view, const GradientDepthOptions& options) {
@@ -298,14 +382,18 @@ DepthMap GradientDepthEstimator::Estimate(const ViewImage& reference, const std:
   std::vector<const ViewImage*> nb_prepared;
   for (const ViewImage* nb : neighbors)
     nb_prepared.push_back(nb && !nb->image.empty() && nb->image.type() == CV_32FC3 ? prepared(*nb) : nullptr);
-  // Pair geometry for the neighbours within the angle, sorted by angle.
+  // The views the hierarchy uses (SelectHierarchyViews), and their pair
+  // geometry in the order of use: pairs[0..first_level) are the first level.
+  std::vector<const PinholeView*> nb_views;
+  std::vector<char> nb_grid;
+  for (const ViewImage* nb : nb_prepared) {
+    nb_views.push_back(nb ? &nb->view : nullptr);
+    nb_grid.push_back(nb ? nb->on_grid : 0);
+  }
+  const std::vector<int> selected = SelectHierarchyViews(vi, nb_views, nb_grid, o);
   std::vector<PairGeometry> pairs;
-  for (size_t q = 0; q < neighbors.size(); ++q) {
+  for (int q : selected) {
     const ViewImage* nb = nb_prepared[q];
-    if (!nb) continue;
-    const double c = std::clamp(vi.ViewingDirection().dot(nb->view.ViewingDirection()), -1.0, 1.0);
-    const double angle = std::acos(c) * 180.0 / M_PI;
-    if (angle > o.max_view_angle_deg) continue;
     PairGeometry pg;
     pg.view = nb;
     pg.image = &nb->smoothed;
@@ -318,47 +406,21 @@ DepthMap GradientDepthEstimator::Estimate(const ViewImage& reference, const std:
     pg.A = nb->view.K * R * vi.K_inv;
     pg.a = nb->view.K * t;
     pg.baseline = nb->view.Center() - vi.Center();
-    if (pg.baseline.norm() < 1e-9) continue;  // coincident camera: no parallax
     pg.A_inv = pg.A.inverse();
     pg.g = pg.A_inv * pg.a;
     pg.r3 = pg.A_inv.row(2);
     pg.r3a = pg.r3.dot(pg.a);
-    pg.angle_deg = angle;
+    pg.angle_deg = AngleDeg(vi.ViewingDirection(), nb->view.ViewingDirection());
     pairs.push_back(pg);
   }
-  std::sort(pairs.begin(), pairs.end(),
-            [](const PairGeometry& x, const PairGeometry& y) { return x.angle_deg < y.angle_deg; });
   if (pairs.empty()) {
     spdlog::warn("depth: no usable neighbour within {}°; empty depth map", o.max_view_angle_deg);
     return out;
   }
-  // First level: the nearest view, and the nearest one on the other side of it.
   std::vector<int> first_level = {0};
-  for (size_t k = 1; k < pairs.size(); ++k) {
-    if (pairs[k].baseline.dot(pairs[0].baseline) < 0) {
-      first_level.push_back(static_cast<int>(k));
-      break;
-    }
-  }
-  // Later levels, nearest first. On each side a view is used when its angle
-  // is at least level_angle_ratio times the last used one (the farthest view
-  // always is): far views carry nearly all the depth information, and one
-  // step of the ratio keeps the prediction within the ±1 px search.
-  std::vector<int> order = first_level;
-  if (o.use_hierarchy) {
-    double last_angle[2] = {0, 0};
-    for (int f : first_level) last_angle[pairs[f].baseline.dot(pairs[0].baseline) < 0] = pairs[f].angle_deg;
-    int farthest[2] = {-1, -1};
-    for (size_t k = 0; k < pairs.size(); ++k) farthest[pairs[k].baseline.dot(pairs[0].baseline) < 0] = k;
-    for (size_t k = 0; k < pairs.size(); ++k) {
-      if (std::find(first_level.begin(), first_level.end(), static_cast<int>(k)) != first_level.end()) continue;
-      const int side = pairs[k].baseline.dot(pairs[0].baseline) < 0;
-      if (pairs[k].angle_deg >= o.level_angle_ratio * last_angle[side] || static_cast<int>(k) == farthest[side]) {
-        order.push_back(static_cast<int>(k));
-        last_angle[side] = pairs[k].angle_deg;
-      }
-    }
-  }
+  if (pairs.size() > 1 && pairs[1].baseline.dot(pairs[0].baseline) < 0) first_level.push_back(1);
+  std::vector<int> order;
+  for (size_t k = 0; k < pairs.size(); ++k) order.push_back(static_cast<int>(k));
 
   // Search range from V.
   double d_near = o.min_depth, d_far = o.max_depth;

@@ -61,6 +61,20 @@ struct GradientDepthOptions {
   // Levels after the first use, on each side, only views at least this many
   // times the angle of the previous level's view (1: every view within 5°).
   double level_angle_ratio = 1.0;
+  // Thinning of dense sequences (ours): levels after the first use only views
+  // on the hierarchy grid (ViewImage::on_grid; HierarchyGrid below spaces it
+  // at least this many degrees apart along the sequence), and on each side
+  // only views at least this many degrees (angle between viewing directions)
+  // from the previous level's view; the farthest such view is always used.
+  // The first level (nearest view on each side) is never thinned. At 0.5° a
+  // sequence 0.75° apart (the figurines, the synthetic 480-frame loop) is
+  // unchanged, and one 0.12° apart (a 3000-frame loop) uses ~18 views within
+  // 5° instead of ~83. A level_angle_ratio > 1 thins compute too, but relative
+  // to each reference, so the union of the frames that the pending views of a
+  // stream need is still every frame within 5°: StreamingDepth cannot hold
+  // fewer. 0: every view within max_view_angle_deg (the paper), whatever
+  // their on_grid flags.
+  double level_min_step_deg = 0.5;
   // σ (pixels) of a Gaussian applied to the images the patches sample (ours,
   // not the paper's): it removes the sub-pixel bias of bilinear sampling on
   // texture near the pixel scale, which otherwise dominates the error at 0.5 %
@@ -80,6 +94,9 @@ struct ViewImage {
   // for many references; computed on the fly when empty.
   cv::Mat smoothed;  // CV_32FC3, image smoothed by presmooth_sigma
   cv::Mat grey;      // CV_32F, grey levels of `smoothed`
+  // On the hierarchy grid (see GradientDepthOptions::level_min_step_deg):
+  // usable beyond the first level. Callers without a sequence leave it true.
+  bool on_grid = true;
 };
 
 class GradientDepthEstimator {
@@ -98,6 +115,22 @@ class GradientDepthEstimator {
  private:
   GradientDepthOptions options_;
 };
+
+// The hierarchy grid of a sequence (in its order): view 0, then each view
+// whose viewing direction is at least options.level_min_step_deg from that of
+// the last view kept. Fixed for the whole sequence, so the pending views of a
+// stream share their later-level views. All true when the step is 0 or the
+// hierarchy is off.
+std::vector<char> HierarchyGrid(const std::vector<PinholeView>& views, const GradientDepthOptions& options);
+
+// The neighbours Estimate uses for `reference`, in the order it uses them
+// (first level, then the later levels nearest first): indices into
+// `neighbors`. Those beyond max_view_angle_deg or at the reference's centre
+// are left out; on_grid[k] (empty: all true) says whether neighbour k is on
+// the hierarchy grid. Selecting again among the selected views gives the same
+// views, so a caller may pass Estimate only these.
+std::vector<int> SelectHierarchyViews(const PinholeView& reference, const std::vector<const PinholeView*>& neighbors,
+                                      const std::vector<char>& on_grid, const GradientDepthOptions& options);
 
 // Fills view->smoothed and view->grey from view->image: Gaussian
 // pre-smoothing with options.presmooth_sigma (none when 0), then grey levels.

@@ -44,21 +44,37 @@ StreamingDepthStats StreamingDepth::Run(FrameSource& frames, const std::vector<i
     if (options_.run_filter)
       for (int j : wide.Neighbors(i)) need_sparse[j] = 1;
   }
+  // The frames each sparse map uses: the estimator's own selection among the
+  // views within 5°, on the sequence's hierarchy grid (level_min_step_deg), so
+  // a dense sequence holds only the grid frames and the pending references
+  // with their nearest neighbours, not every frame within 5°.
+  const std::vector<char> on_grid = HierarchyGrid(views_, options_.gradient);
+  std::vector<std::vector<int>> uses(n);  // frames sparse map s uses besides s
   std::vector<int> sparse_ready(n, -1);  // last frame index that sparse map s needs
   std::vector<int> frame_last_use(n, -1);
   for (int s = 0; s < n; ++s) {
     if (!need_sparse[s]) continue;
+    const std::vector<int>& nb = near.Neighbors(s);
+    std::vector<const PinholeView*> nb_views;
+    std::vector<char> nb_grid;
+    for (int j : nb) {
+      nb_views.push_back(&views_[j]);
+      nb_grid.push_back(on_grid[j]);
+    }
+    for (int q : SelectHierarchyViews(views_[s], nb_views, nb_grid, options_.gradient)) uses[s].push_back(nb[q]);
     int last = s;
-    for (int j : near.Neighbors(s)) last = std::max(last, j);
+    for (int j : uses[s]) last = std::max(last, j);
     sparse_ready[s] = last;
     frame_last_use[s] = std::max(frame_last_use[s], last);
-    for (int j : near.Neighbors(s)) frame_last_use[j] = std::max(frame_last_use[j], last);
+    for (int j : uses[s]) frame_last_use[j] = std::max(frame_last_use[j], last);
   }
   std::vector<int> filter_ready(n, -1), sparse_last_use(n, -1);
   std::vector<char> is_wanted(n, 0);
   for (int i : wanted) {
     is_wanted[i] = 1;
+    // Every frame within 5° of i is read (and tapped) before i is emitted.
     int last = sparse_ready[i];
+    for (int j : near.Neighbors(i)) last = std::max(last, j);
     if (options_.run_filter)
       for (int j : wide.Neighbors(i)) last = std::max(last, sparse_ready[j]);
     filter_ready[i] = last;
@@ -71,7 +87,7 @@ StreamingDepthStats StreamingDepth::Run(FrameSource& frames, const std::vector<i
     if (need_sparse[s]) sparse_at[sparse_ready[s]].push_back(s);
   for (int i : wanted) filter_at[filter_ready[i]].push_back(i);
   int last_frame = -1;
-  for (int s = 0; s < n; ++s) last_frame = std::max(last_frame, sparse_ready[s]);
+  for (int s = 0; s < n; ++s) last_frame = std::max({last_frame, sparse_ready[s], filter_ready[s]});
 
   const GradientDepthEstimator estimator(options_.gradient);
   std::unique_ptr<VoteGrid> grid;
@@ -95,6 +111,7 @@ StreamingDepthStats StreamingDepth::Run(FrameSource& frames, const std::vector<i
       ViewImage& v = held[f];
       v.view = views_[f];
       v.image = frame.image;
+      v.on_grid = on_grid[f];
       PrepareViewImage(&v, options_.gradient);
     }
     if (frame_tap_) {
@@ -114,7 +131,8 @@ StreamingDepthStats StreamingDepth::Run(FrameSource& frames, const std::vector<i
     for (int s : sparse_at[f]) {
       Timer timer;
       std::vector<const ViewImage*> nbs;
-      for (int j : near.Neighbors(s)) nbs.push_back(&held.at(j));
+      for (int j : uses[s]) nbs.push_back(&held.at(j));
+      stats.neighbors_used += static_cast<long long>(uses[s].size());
       sparse[s] = estimator.Estimate(held.at(s), nbs, volume_);
       stats.seconds_sparse += timer.Seconds();
       ++stats.sparse_maps;

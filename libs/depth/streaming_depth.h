@@ -3,9 +3,11 @@
 // frame stream in sequence order, holding only the frames and sparse maps the
 // pending views still need. All poses are known up front (they come with the
 // dataset), so each view's neighbourhoods are known before its frames arrive:
-// view i's sparse map is computed as soon as the last frame within 5° of it
-// has been read, and its filtered map as soon as the sparse maps of all views
-// within 15° exist. For a dense path that is a window of a few dozen frames.
+// view i's sparse map is computed as soon as the last frame its hierarchy
+// uses (within 5°; on a dense sequence only the hierarchy grid's frames and
+// the nearest ones, see GradientDepthOptions::level_min_step_deg) has been
+// read, and its filtered map as soon as the sparse maps of all views within
+// 15° exist. For a dense path that is a window of a few dozen frames.
 #include <functional>
 #include <vector>
 
@@ -28,6 +30,7 @@ struct StreamingDepthStats {
   int filtered_maps = 0;
   int max_frames_held = 0;
   int max_sparse_held = 0;
+  long long neighbors_used = 0;  // summed over the sparse maps (the views each one's hierarchy used)
   double seconds_sparse = 0;
   double seconds_filter = 0;
 };

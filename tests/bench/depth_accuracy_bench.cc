@@ -1,13 +1,14 @@
 // Benchmark (not a test): sparse and filtered depth accuracy, coverage and
 // time per view on a dataset with ground-truth depth (figurines or synthetic).
 //   depth_accuracy_bench DATASET [--gt-views N] [--skip K] [--threads T] [--no-hierarchy] [--no-filter]
-//                        [--every-view] [--shift-iterations N] [--voxel METRES]
+//                        [--every-view] [--shift-iterations N] [--voxel METRES] [--level-step DEG]
 // Evaluates the first N views that have ground truth (after skipping the
 // first --skip ones), streaming frames from the start of the sequence.
 // --every-view: depth (and filtering) of every view from the first to the
 // last evaluated one, as the pipeline runs it (the vote window then moves by
 // one view per filtered view); accuracy is still measured on the views with
 // ground truth only.
+// --level-step: GradientDepthOptions::level_min_step_deg (0: every view within 5°).
 #include <spdlog/spdlog.h>
 #include <tbb/global_control.h>
 
@@ -35,7 +36,7 @@ void PrintCurve(const char* name, const DepthMetrics& m) {
 int main(int argc, char** argv) {
   if (argc < 2) {
     std::fprintf(stderr, "usage: %s DATASET [--gt-views N] [--skip K] [--threads T] [--no-hierarchy] [--no-filter] "
-                 "[--every-view] [--shift-iterations N] [--voxel METRES]\n",
+                 "[--every-view] [--shift-iterations N] [--voxel METRES] [--level-step DEG]\n",
                  argv[0]);
     return 2;
   }
@@ -53,6 +54,11 @@ int main(int argc, char** argv) {
     else if (!std::strcmp(argv[a], "--every-view")) every_view = true;
     else if (!std::strcmp(argv[a], "--shift-iterations") && a + 1 < argc) sopt.gradient.shift_iterations = std::atoi(argv[++a]);
     else if (!std::strcmp(argv[a], "--voxel") && a + 1 < argc) sopt.filter.voxel_size = std::atof(argv[++a]);
+    else if (!std::strcmp(argv[a], "--level-step") && a + 1 < argc) sopt.gradient.level_min_step_deg = std::atof(argv[++a]);
+    else {
+      std::fprintf(stderr, "unknown or incomplete option %s\n", argv[a]);
+      return 2;
+    }
   }
   spdlog::set_level(spdlog::level::warn);
   tbb::global_control control(tbb::global_control::max_allowed_parallelism, threads);
@@ -114,12 +120,13 @@ int main(int argc, char** argv) {
     std::fflush(stdout);
   });
   const double total = timer.Seconds();
-  std::printf("views %zu, frames read %d, sparse maps %d (%.0f ms each), filtered %d (%.0f ms each), "
-              "max frames held %d, max sparse held %d, total %.1f s, peak RSS %.0f MiB, threads %d\n",
+  std::printf("views %zu, frames read %d, sparse maps %d (%.0f ms each, %.1f neighbours each), filtered %d (%.0f ms each), "
+              "max frames held %d, max sparse held %d, total %.1f s, peak RSS %.0f MiB, threads %d, level step %.2f deg\n",
               wanted.size(), stats.frames_read, stats.sparse_maps,
-              1000 * stats.seconds_sparse / std::max(1, stats.sparse_maps), stats.filtered_maps,
+              1000 * stats.seconds_sparse / std::max(1, stats.sparse_maps),
+              static_cast<double>(stats.neighbors_used) / std::max(1, stats.sparse_maps), stats.filtered_maps,
               1000 * stats.seconds_filter / std::max(1, stats.filtered_maps), stats.max_frames_held,
-              stats.max_sparse_held, total, PeakRssBytes() / 1048576.0, threads);
+              stats.max_sparse_held, total, PeakRssBytes() / 1048576.0, threads, sopt.gradient.level_min_step_deg);
   PrintCurve("sparse", sparse_total);
   if (sopt.run_filter) PrintCurve("filtered", filtered_total);
   return 0;

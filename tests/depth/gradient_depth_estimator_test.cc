@@ -2,6 +2,9 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
+#include <cmath>
+
 #include "synth_views.h"
 #include "util/error.h"
 
@@ -112,6 +115,97 @@ TEST(GradientDepthEstimator, DegenerateInputGivesEmptyMapsNotNaN) {
   EXPECT_TRUE(cv::checkRange(m.depth) && cv::checkRange(m.confidence));
 }
 
+std::vector<PinholeView> SequenceViews(const synth::SynthSequence& seq) {
+  std::vector<PinholeView> views;
+  for (int i = 0; i < seq.NumFrames(); ++i) views.push_back(seq.View(i));
+  return views;
+}
+
+TEST(GradientDepthEstimator, HierarchyGridLeavesFigurinesSpacingUnchanged) {
+  // 480 frames per loop, 0.75° apart (the figurines' spacing): every view
+  // within 5° is on the grid and used, as with the thinning off.
+  synth::SynthOptions so;
+  so.scene = "sphere";
+  so.frames = 480;
+  so.width = 96;
+  so.height = 54;
+  const auto seq = synth::SynthSequence::Create(so);
+  const std::vector<PinholeView> views = SequenceViews(seq);
+  const GradientDepthOptions o;
+  const std::vector<char> grid = HierarchyGrid(views, o);
+  EXPECT_EQ(std::count(grid.begin(), grid.end(), 1), 480);
+  std::vector<Eigen::Vector3d> dirs;
+  for (const auto& v : views) dirs.push_back(v.ViewingDirection());
+  const ViewGraph graph(dirs, o.max_view_angle_deg);
+  for (int ref : {0, 100, 479}) {
+    std::vector<const PinholeView*> nbs;
+    for (int j : graph.Neighbors(ref)) nbs.push_back(&views[j]);
+    ASSERT_GE(nbs.size(), 10u);
+    EXPECT_EQ(SelectHierarchyViews(views[ref], nbs, {}, o).size(), nbs.size()) << "reference " << ref;
+  }
+}
+
+TEST(GradientDepthEstimator, DenseSequenceThinnedToGridKeepsAccuracyWithFewViews) {
+  // 3000 frames per loop (0.12° apart, a real video's spacing): ~100 views
+  // within 5°. On the grid the hierarchy uses a fraction of them, reaching as
+  // far, with the same accuracy.
+  const auto v = MakeSynthViews("sphere", 0, 5.0, 320, 180, 3000);
+  ASSERT_GE(v.neighbors.size(), 70u);
+  const GradientDepthOptions thin;  // default level_min_step_deg
+  ASSERT_GT(thin.level_min_step_deg, 0);
+  GradientDepthOptions all = thin;
+  all.level_min_step_deg = 0;
+  const std::vector<char> grid = HierarchyGrid(SequenceViews(*v.sequence), thin);
+  std::vector<ViewImage> on_grid = v.neighbors;
+  std::vector<const ViewImage*> grid_ptrs;
+  std::vector<const PinholeView*> nb_views;
+  std::vector<char> nb_grid;
+  for (size_t k = 0; k < on_grid.size(); ++k) {
+    on_grid[k].on_grid = grid[v.neighbor_ids[k]];
+    grid_ptrs.push_back(&on_grid[k]);
+    nb_views.push_back(&on_grid[k].view);
+    nb_grid.push_back(on_grid[k].on_grid);
+  }
+  const std::vector<int> used = SelectHierarchyViews(v.ref.view, nb_views, nb_grid, thin);
+  EXPECT_EQ(SelectHierarchyViews(v.ref.view, nb_views, nb_grid, all).size(), v.neighbors.size());
+  std::printf("views within 5°: %zu, used on the grid: %zu\n", v.neighbors.size(), used.size());
+  EXPECT_LE(used.size(), 24u);
+  EXPECT_GE(used.size(), 10u);
+  // The first level is the nearest view on each side, on the grid or not.
+  ASSERT_GE(used.size(), 2u);
+  EXPECT_EQ(used[0], 0);
+  // The farthest view used is nearly as far as the farthest within 5°.
+  auto angle = [&](int k) {
+    return std::acos(std::clamp(v.ref.view.ViewingDirection().dot(nb_views[k]->ViewingDirection()), -1.0, 1.0)) *
+           180.0 / M_PI;
+  };
+  double far_used = 0, far_all = 0;
+  for (int k : used) far_used = std::max(far_used, angle(k));
+  for (size_t k = 0; k < nb_views.size(); ++k) far_all = std::max(far_all, angle(static_cast<int>(k)));
+  EXPECT_GE(far_used, far_all - thin.level_min_step_deg);
+  // Selecting among the selected views gives them again (StreamingDepth passes only those).
+  std::vector<const PinholeView*> sub_views;
+  std::vector<char> sub_grid;
+  for (int k : used) {
+    sub_views.push_back(nb_views[k]);
+    sub_grid.push_back(nb_grid[k]);
+  }
+  EXPECT_EQ(SelectHierarchyViews(v.ref.view, sub_views, sub_grid, thin).size(), used.size());
+
+  const auto s_all = ScoreDepth(v, GradientDepthEstimator(all).Estimate(v.ref, v.NeighborPtrs(), v.volume), true);
+  const auto s_thin = ScoreDepth(v, GradientDepthEstimator(thin).Estimate(v.ref, grid_ptrs, v.volume), true);
+  // Without the grid (a caller with no sequence): thinned relative to the reference.
+  const auto s_local = ScoreDepth(v, GradientDepthEstimator(thin).Estimate(v.ref, v.NeighborPtrs(), v.volume), true);
+  std::printf("dense sphere: all views %.4f/%.4f, grid %.4f/%.4f, local step %.4f/%.4f (accuracy/coverage)\n",
+              s_all.Accuracy(), s_all.Coverage(), s_thin.Accuracy(), s_thin.Coverage(), s_local.Accuracy(),
+              s_local.Coverage());
+  ASSERT_GT(s_all.expected, 1000);
+  EXPECT_GE(s_all.Accuracy(), 0.93);
+  EXPECT_GE(s_thin.Accuracy(), s_all.Accuracy() - 0.01);
+  EXPECT_GE(s_thin.Coverage(), s_all.Coverage() - 0.01);
+  EXPECT_GE(s_local.Accuracy(), s_all.Accuracy() - 0.01);
+}
+
 TEST(GradientDepthEstimatorOptions, CheckRejectsBadValues) {
   GradientDepthOptions o;
   o.patch_length = 4;
@@ -119,6 +213,11 @@ TEST(GradientDepthEstimatorOptions, CheckRejectsBadValues) {
   o = GradientDepthOptions();
   o.sigma_c = 0;
   EXPECT_THROW(GradientDepthEstimator{o}, OptionError);
+  o = GradientDepthOptions();
+  o.level_min_step_deg = -1;
+  EXPECT_THROW(o.Check(), OptionError);
+  o.level_min_step_deg = o.max_view_angle_deg;
+  EXPECT_THROW(o.Check(), OptionError);
 }
 
 }  // namespace

@@ -2,6 +2,7 @@
 
 #include <gtest/gtest.h>
 
+#include "geometry/view_graph.h"
 #include "synth/sequence.h"
 #include "util/error.h"
 
@@ -39,6 +40,49 @@ TEST(StreamingDepth, EmitsEveryWantedViewOnceWithBoundedWindow) {
   EXPECT_LE(stats.max_sparse_held, 70);
   EXPECT_LE(stats.frames_read, 240);  // stops after the last frame any wanted view needs
   EXPECT_EQ(stats.filtered_maps, 4);
+}
+
+TEST(StreamingDepth, DenseSequenceHoldsOnlyTheHierarchyGrid) {
+  // 3000 frames per loop (0.12° apart): ~100 frames within 5° of a view. On
+  // the hierarchy grid (level_min_step_deg) the sparse maps use, and the
+  // stage holds, a fraction of them; every frame within 5° is still tapped
+  // before its view is emitted.
+  const auto seq = SmallSequence(3000);
+  std::vector<PinholeView> views;
+  std::vector<Eigen::Vector3d> dirs;
+  for (int i = 0; i < seq->NumFrames(); ++i) {
+    views.push_back(seq->View(i));
+    dirs.push_back(views.back().ViewingDirection());
+  }
+  const ViewGraph near(dirs, 5.0);
+  const std::vector<int> wanted = {150, 160};
+  auto run = [&](double step, std::vector<int>* emitted) {
+    StreamingDepthOptions o;
+    o.run_filter = false;
+    o.gradient.level_min_step_deg = step;
+    StreamingDepth stage(views, seq->scene().foreground_bbox(), o);
+    std::vector<char> tapped(views.size(), 0);
+    stage.SetFrameTap([&](int f, const ViewImage&) { tapped[f] = 1; });
+    auto frames = seq->OpenFrames();
+    const auto stats = stage.Run(*frames, wanted, [&](int i, const cv::Mat&, const DepthMap& s, const DepthMap&) {
+      emitted->push_back(i);
+      EXPECT_GT(s.CountValid(), 0);
+      for (int j : near.Neighbors(i)) EXPECT_TRUE(tapped[j]) << "view " << i << " emitted before frame " << j;
+    });
+    return stats;
+  };
+  std::vector<int> emitted_all, emitted_thin;
+  const auto all = run(0.0, &emitted_all);
+  const auto thin = run(GradientDepthOptions().level_min_step_deg, &emitted_thin);
+  std::printf("frames held: %d (all views within 5°), %d (grid); neighbours per map %.1f, %.1f\n",
+              all.max_frames_held, thin.max_frames_held, all.neighbors_used / 2.0, thin.neighbors_used / 2.0);
+  EXPECT_EQ(emitted_all.size(), 2u);
+  EXPECT_EQ(emitted_thin.size(), 2u);
+  EXPECT_GE(all.neighbors_used / 2, 70);
+  EXPECT_LE(thin.neighbors_used / 2, 24);
+  EXPECT_GE(all.max_frames_held, 70);
+  EXPECT_LE(thin.max_frames_held, 40);
+  EXPECT_EQ(thin.frames_read, all.frames_read);  // the tap contract: every frame within 5° is read
 }
 
 TEST(StreamingDepth, ShortStreamAndBadIndexAreErrors) {
