@@ -68,8 +68,8 @@ struct GradientDepthOptions {
   // from the previous level's view; the farthest such view is always used.
   // The first level (nearest view on each side) is never thinned. At 0.5° a
   // sequence 0.75° apart (the figurines, the synthetic 480-frame loop) is
-  // unchanged, and one 0.12° apart (a 3000-frame loop) uses ~18 views within
-  // 5° instead of ~83. A level_angle_ratio > 1 thins compute too, but relative
+  // unchanged, and one 0.12° apart (a 3000-frame loop) uses ~17 of the ~100
+  // views within 5° (docs/benchmarks.md, last section). A level_angle_ratio > 1 thins compute too, but relative
   // to each reference, so the union of the frames that the pending views of a
   // stream need is still every frame within 5°: StreamingDepth cannot hold
   // fewer. 0: every view within max_view_angle_deg (the paper), whatever
