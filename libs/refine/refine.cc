@@ -2,6 +2,8 @@
 
 #include <spdlog/spdlog.h>
 
+#include <string>
+
 #include "util/error.h"
 #include "util/progress.h"
 
@@ -55,10 +57,14 @@ RefineResult RefineFusedSurface(const ProbabilisticFusion& fusion, const std::ve
   st.mesh_vertices = result.mesh.vertices.size();
   st.mesh_triangles = result.mesh.triangles.size();
   st.seconds_total = total.Seconds();
-  spdlog::info("refine: {} occupied voxels, |R| {}, {} carved from {} views; Poisson of {} points (depth {}): {} "
-               "triangles; {:.1f} s ({:.1f} grid, {:.1f} carving, {:.1f} Poisson)",
-               st.occupied_voxels, st.region_voxels, st.carved, st.carving_views, st.poisson_points, st.poisson_depth,
-               st.mesh_triangles, st.seconds_total, st.seconds_grid, st.seconds_carving, st.seconds_poisson);
+  const std::string surface = options.use_poisson ? fmt::format("Poisson of {} points (depth {})", st.poisson_points,
+                                                                  st.poisson_depth)
+                                                   : std::string("marching cubes of the carved grid");
+  spdlog::info("refine: {} occupied voxels, |R| {}, {} carved from {} views; {}: {} triangles; {:.1f} s ({:.1f} grid, "
+               "{:.1f} carving, {:.1f} {})",
+               st.occupied_voxels, st.region_voxels, st.carved, st.carving_views, surface, st.mesh_triangles,
+               st.seconds_total, st.seconds_grid, st.seconds_carving, st.seconds_poisson,
+               options.use_poisson ? "Poisson" : "meshing");
   return result;
 }
 

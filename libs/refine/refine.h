@@ -23,6 +23,7 @@ struct RefineStats {
   std::size_t poisson_points = 0;
   int poisson_depth = 0;
   std::size_t mesh_vertices = 0, mesh_triangles = 0;
+  // seconds_poisson: the final surface (Poisson, or marching cubes of the carved grid)
   double seconds_grid = 0, seconds_carving = 0, seconds_poisson = 0, seconds_total = 0;
 };
 
