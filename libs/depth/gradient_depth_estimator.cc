@@ -37,6 +37,9 @@ namespace {
 double AngleDeg(const Eigen::Vector3d& a, const Eigen::Vector3d& b) {
   return std::acos(std::clamp(a.dot(b), -1.0, 1.0)) * 180.0 / M_PI;
 }
+// At least `step` degrees apart, up to rounding: a sequence spaced exactly
+// `step` apart (the plane rig's 0.5°) is not thinned.
+bool AtLeastStep(double angle_deg, double step_deg) { return angle_deg >= step_deg - 1e-6; }
 }  // namespace
 
 std::vector<char> HierarchyGrid(const std::vector<PinholeView>& views, const GradientDepthOptions& o) {
@@ -45,7 +48,7 @@ std::vector<char> HierarchyGrid(const std::vector<PinholeView>& views, const Gra
   Eigen::Vector3d last = views[0].ViewingDirection();
   for (size_t k = 1; k < views.size(); ++k) {
     const Eigen::Vector3d d = views[k].ViewingDirection();
-    grid[k] = AngleDeg(d, last) >= o.level_min_step_deg;
+    grid[k] = AtLeastStep(AngleDeg(d, last), o.level_min_step_deg);
     if (grid[k]) last = d;
   }
   return grid;
@@ -106,7 +109,7 @@ std::vector<int> SelectHierarchyViews(const PinholeView& vi, const std::vector<c
     if (std::find(first_level.begin(), first_level.end(), k) != first_level.end() || !grid(pairs[k])) continue;
     const int side = side_of(pairs[k]);
     const bool far_enough = pairs[k].angle >= o.level_angle_ratio * last_angle[side] &&
-                            (!thin || AngleDeg(pairs[k].dir, last_dir[side]) >= o.level_min_step_deg);
+                            (!thin || AtLeastStep(AngleDeg(pairs[k].dir, last_dir[side]), o.level_min_step_deg));
     if (far_enough || static_cast<int>(k) == farthest[side]) {
       order.push_back(pairs[k].index);
       last_angle[side] = pairs[k].angle;

@@ -67,8 +67,8 @@ struct GradientDepthOptions {
   // only views at least this many degrees (angle between viewing directions)
   // from the previous level's view; the farthest such view is always used.
   // The first level (nearest view on each side) is never thinned. At 0.5° a
-  // sequence 0.75° apart (the figurines, the synthetic 480-frame loop) is
-  // unchanged, and one 0.12° apart (a 3000-frame loop) uses ~17 of the ~100
+  // sequence at least 0.5° apart (the figurines and the synthetic 480-frame
+  // loop at 0.75°, the plane rig at exactly 0.5°) is unchanged, and one 0.12° apart (a 3000-frame loop) uses ~17 of the ~100
   // views within 5° (docs/benchmarks.md, last section). A level_angle_ratio > 1 thins compute too, but relative
   // to each reference, so the union of the frames that the pending views of a
   // stream need is still every frame within 5°: StreamingDepth cannot hold

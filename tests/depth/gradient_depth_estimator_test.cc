@@ -121,7 +121,7 @@ std::vector<PinholeView> SequenceViews(const synth::SynthSequence& seq) {
   return views;
 }
 
-TEST(GradientDepthEstimator, HierarchyGridLeavesFigurinesSpacingUnchanged) {
+TEST(GradientDepthEstimator, HierarchyGridLeavesSpacingsAtOrAboveTheStepUnchanged) {
   // 480 frames per loop, 0.75° apart (the figurines' spacing): every view
   // within 5° is on the grid and used, as with the thinning off.
   synth::SynthOptions so;
@@ -143,6 +143,22 @@ TEST(GradientDepthEstimator, HierarchyGridLeavesFigurinesSpacingUnchanged) {
     ASSERT_GE(nbs.size(), 10u);
     EXPECT_EQ(SelectHierarchyViews(views[ref], nbs, {}, o).size(), nbs.size()) << "reference " << ref;
   }
+  // The plane rig: 120 frames over 60°, exactly the step (0.5°) apart.
+  synth::SynthOptions po;
+  po.scene = "plane";
+  po.frames = 120;
+  po.width = 96;
+  po.height = 54;
+  const std::vector<PinholeView> plane = SequenceViews(synth::SynthSequence::Create(po));
+  const std::vector<char> plane_grid = HierarchyGrid(plane, o);
+  EXPECT_EQ(std::count(plane_grid.begin(), plane_grid.end(), 1), 120);
+  std::vector<Eigen::Vector3d> plane_dirs;
+  for (const auto& v : plane) plane_dirs.push_back(v.ViewingDirection());
+  const ViewGraph plane_graph(plane_dirs, o.max_view_angle_deg);
+  std::vector<const PinholeView*> nbs;
+  for (int j : plane_graph.Neighbors(60)) nbs.push_back(&plane[j]);
+  ASSERT_GE(nbs.size(), 16u);
+  EXPECT_EQ(SelectHierarchyViews(plane[60], nbs, plane_grid, o).size(), nbs.size());
 }
 
 TEST(GradientDepthEstimator, DenseSequenceThinnedToGridKeepsAccuracyWithFewViews) {
