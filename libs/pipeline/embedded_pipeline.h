@@ -9,8 +9,9 @@
 // plus `color_views` frames kept for colouring), never by the sequence length.
 //
 // The fused mesh is then refined (§5 end, libs/refine): voxel carving by the
-// photo-consistency of `carving_views` kept frames, and screened Poisson of
-// the carved surface's boundary voxels; mesh_raw stays the fused mesh.
+// photo-consistency of `carving_views` kept frames, then the carved grid's
+// iso-surface (or, with refine_options.use_poisson, screened Poisson of its
+// boundary voxels); mesh_raw stays the fused mesh.
 #include <filesystem>
 #include <functional>
 #include <nlohmann/json.hpp>
@@ -92,7 +93,8 @@ struct PipelineOptions {
   // Frames kept (evenly spread over the processed views) to colour the mesh; 0: no colours.
   int color_views = 8;
   ColoringOptions coloring;
-  // Refinement after fusion (BRIEF §1.6): voxel carving and screened Poisson;
+  // Refinement after fusion (BRIEF §1.6): voxel carving, then marching cubes of
+  // the carved grid (screened Poisson with refine_options.use_poisson);
   // false: the final mesh is the fused iso-surface.
   bool refine = true;
   RefineOptions refine_options;
