@@ -26,6 +26,7 @@ struct RunArgs {
   std::string views;
   bool no_densify = false;
   bool no_refine = false;
+  bool poisson = false;
   int color_views = 8;
   double sigma_s = 0;
 };
@@ -40,6 +41,8 @@ int RunPipeline(const RunArgs& args) {
   options.write_depth = args.write_depth;
   options.densify = !args.no_densify;
   options.refine = !args.no_refine;
+  options.refine_options.use_poisson = args.poisson;
+  if (args.poisson && args.no_refine) throw OptionError("--poisson and --no-refine exclude each other");
   options.color_views = args.color_views;
   if (args.sigma_s < 0) throw OptionError("--sigma-s must be positive");
   if (args.sigma_s > 0) (options.densify ? options.dense_sigma_s : options.fusion.sigma_s) = args.sigma_s;
@@ -75,7 +78,9 @@ void AddRunCommand(CLI::App& root, int* exit_code) {
   cmd->add_flag("--write-depth", args->write_depth, "Also write the fused per-view depth maps (depth/, confidence/ PFM)");
   cmd->add_option("--views", args->views, "Views to process, A:B:STEP (0-based, B exclusive); default all");
   cmd->add_flag("--no-refine", args->no_refine,
-                "Skip carving and screened Poisson: mesh.ply is then the fused iso-surface, like mesh_raw.ply");
+                "Skip the refinement (voxel carving): mesh.ply is then the fused iso-surface, like mesh_raw.ply");
+  cmd->add_flag("--poisson", args->poisson,
+                "Mesh the carved surface by screened Poisson instead of marching cubes (smoother, but loses thin parts)");
   cmd->add_flag("--no-densify", args->no_densify, "Fuse the filtered sparse maps without densification (§4)");
   cmd->add_option("--sigma-s", args->sigma_s,
                   "σ_s of the fusion's confidence model (eq. 12-13); default 0.15 for dense maps, 0.7 with --no-densify");
