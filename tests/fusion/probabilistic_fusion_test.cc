@@ -303,6 +303,17 @@ TEST(ProbabilisticFusion, StoreBudgetBoundsMemoryAndKeepsTheSurface) {
   EXPECT_EQ(CompareH(exact, roomy, options.surface_threshold).max, 0.0);
 }
 
+// A textureless rod 4 mm across and 100 mm long under a dome.
+synth::Scene RodScene() {
+  synth::Scene scene("rod");
+  scene.set_foreground_bbox(Box({-0.02, -0.02, -0.06}, {0.02, 0.02, 0.06}));
+  scene.Add(synth::Primitive::Cylinder({0, 0, -0.05}, {0.0, 0.0, 0.05}, 0.002, synth::Material::Flat({0.9f, 0.9f, 0.9f}))
+                .Named("rod")
+                .Foreground());
+  testing::AddDome(&scene);
+  return scene;
+}
+
 TEST(ProbabilisticFusion, StoreBudgetKeepsThinFeatures) {
   // A 4 mm rod with 2 mm voxels, its voxels activated late: in the first half
   // of the views its depths are weak (c = 0.02, below the activation
@@ -310,12 +321,7 @@ TEST(ProbabilisticFusion, StoreBudgetKeepsThinFeatures) {
   // back-filled from those views — coarsened to 4x4 blocks and more under a
   // budget of 1/16 of the store. Blocks where the rod (2 px) meets background
   // must stay foreground: were they background, those views would carve it.
-  synth::Scene scene("rod");
-  scene.set_foreground_bbox(Box({-0.02, -0.02, -0.06}, {0.02, 0.02, 0.06}));
-  scene.Add(synth::Primitive::Cylinder({0, 0, -0.05}, {0.0, 0.0, 0.05}, 0.002, synth::Material::Flat({0.9f, 0.9f, 0.9f}))
-                .Named("rod")
-                .Foreground());
-  testing::AddDome(&scene);
+  synth::Scene scene = RodScene();
   const double voxel = 0.002;
   Rendered data = RenderAll(scene, testing::RingRig(12, {-25, 0, 25}, Eigen::Vector3d::Zero(), 0.25, 160, 90, 50));
   for (std::size_t i = 0; i < data.depths.size() / 2; ++i) {
@@ -426,12 +432,7 @@ TEST(ProbabilisticFusion, BackgroundRaysCarveFreeSpace) {
 
 TEST(ProbabilisticFusion, ThinCylinderTwoVoxelsAcrossSurvives) {
   // A textureless rod 4 mm across, fused with 2 mm voxels.
-  synth::Scene scene("rod");
-  scene.set_foreground_bbox(Box({-0.02, -0.02, -0.06}, {0.02, 0.02, 0.06}));
-  scene.Add(synth::Primitive::Cylinder({0, 0, -0.05}, {0.0, 0.0, 0.05}, 0.002, synth::Material::Flat({0.9f, 0.9f, 0.9f}))
-                .Named("rod")
-                .Foreground());
-  testing::AddDome(&scene);
+  synth::Scene scene = RodScene();
   ASSERT_TRUE(scene.primitive(0).thin);
   const double voxel = 0.002;
   const Rendered data =
