@@ -3,10 +3,12 @@
 #include <spdlog/spdlog.h>
 
 #include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
 
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <cstring>
 #include <fstream>
 #include <map>
 #include <set>
@@ -87,6 +89,67 @@ nlohmann::json BoxJson(const BoundingBox& b) {
   return {{"min", {b.min.x(), b.min.y(), b.min.z()}}, {"max", {b.max.x(), b.max.y(), b.max.z()}}};
 }
 
+// The pixels of a frame as the windows hold them: CV_8UC3 when the CV_32FC3
+// frame is exactly an 8-bit one as the frame sources make it (ToFloatBgr of
+// it gives back the same floats, bit for bit), else the frame itself. A
+// quarter of the memory for 8-bit input, and the same results.
+cv::Mat CompactFrame(const cv::Mat& frame) {
+  if (frame.type() != CV_32FC3) return frame;
+  cv::Mat u8;
+  frame.convertTo(u8, CV_8U, 255.0);
+  const cv::Mat back = ToFloatBgr(u8);
+  const std::size_t row_bytes = static_cast<std::size_t>(frame.cols) * frame.elemSize();
+  for (int r = 0; r < frame.rows; ++r)
+    if (std::memcmp(back.ptr(r), frame.ptr(r), row_bytes) != 0) return frame;
+  return u8;
+}
+
+// The CV_32FC3 frame of CompactFrame's result.
+cv::Mat ExpandFrame(const cv::Mat& pixels) { return pixels.depth() == CV_8U ? ToFloatBgr(pixels) : pixels; }
+
+// A frame of the densification window.
+struct WindowFrame {
+  ViewImage tapped;          // as tapped, when the frame is not 8-bit (shares the depth stage's pixels)
+  cv::Mat pixels;            // CV_8UC3 otherwise, and `tapped` holds only the view
+  bool depth_smoothed = false;  // the depth stage had filled `smoothed` (presmooth_sigma of §3.1)
+};
+
+WindowFrame MakeWindowFrame(const ViewImage& v, bool compact) {
+  WindowFrame w;
+  w.tapped.view = v.view;
+  w.tapped.on_grid = v.on_grid;
+  const cv::Mat c = compact ? CompactFrame(v.image) : v.image;
+  if (c.depth() == CV_8U) {
+    w.pixels = c;
+    w.depth_smoothed = !v.smoothed.empty();
+  } else {
+    w.tapped = v;
+  }
+  return w;
+}
+
+// The ViewImage the photoconsistency reads, as it was before frames were held
+// in 8 bits: `smoothed` as the depth stage filled it (its presmooth_sigma), or
+// as the photoconsistency would make it (its own). For a neighbour
+// (`keep_image` false) only `smoothed` is read when presmooth_sigma > 0, so
+// `image` then shares it and the unsmoothed floats are not kept.
+ViewImage MaterializeWindowFrame(const WindowFrame& w, const GradientDepthOptions& depth,
+                                 const PhotoconsistencyOptions& photo, bool keep_image) {
+  if (w.pixels.empty()) return w.tapped;
+  ViewImage v;
+  v.view = w.tapped.view;
+  v.on_grid = w.tapped.on_grid;
+  v.image = ExpandFrame(w.pixels);
+  if (photo.presmooth_sigma <= 0) return v;
+  if (w.depth_smoothed && depth.presmooth_sigma <= 0)
+    v.smoothed = v.image;
+  else
+    cv::GaussianBlur(v.image, v.smoothed, cv::Size(0, 0),
+                     w.depth_smoothed ? depth.presmooth_sigma : photo.presmooth_sigma);
+  if (!keep_image) v.image = v.smoothed;
+  return v;
+}
+
 }  // namespace
 
 PipelineResult EmbeddedPipeline::Run(FrameSource& frames) {
@@ -134,12 +197,13 @@ PipelineResult EmbeddedPipeline::Run(FrameSource& frames) {
       for (int j : photo_graph.Neighbors(i)) ++refcount[j];
     }
   }
-  std::map<int, ViewImage> window;
+  std::map<int, WindowFrame> window;
   // Frames kept for colouring: a few evenly spread over the processed views.
   std::set<int> color_ids;
   const int k = std::min<int>(options_.color_views, static_cast<int>(wanted.size()));
   for (int c = 0; c < k; ++c) color_ids.insert(wanted[static_cast<std::size_t>(c) * wanted.size() / k]);
   std::vector<ColorView> color_views;
+  std::map<int, cv::Mat> kept_frames;  // colour and carving frames (CompactFrame) until the stream ends
   // Frames kept for carving, likewise.
   std::set<int> carve_ids;
   const int kc = options_.refine && options_.refine_options.carve
@@ -150,10 +214,10 @@ PipelineResult EmbeddedPipeline::Run(FrameSource& frames) {
 
   StreamingDepth depth(views_, volume_, options_.depth);
   depth.SetFrameTap([&](int f, const ViewImage& v) {
-    if (refcount[f] > 0) window[f] = v;  // shares the pixels with the depth stage's window
+    const bool compact = options_.compact_frames;
+    if (refcount[f] > 0) window[f] = MakeWindowFrame(v, compact);
     st.max_frames_held_pipeline = std::max(st.max_frames_held_pipeline, static_cast<int>(window.size()));
-    if (color_ids.count(f)) color_views.push_back({views_[f], v.image, cv::Mat()});
-    if (carve_ids.count(f)) carve_views.push_back({views_[f], v.image, cv::Mat()});
+    if (color_ids.count(f) || carve_ids.count(f)) kept_frames[f] = compact ? CompactFrame(v.image) : v.image;
   });
 
   const DepthPropagator propagator(options_.propagation);
@@ -166,18 +230,26 @@ PipelineResult EmbeddedPipeline::Run(FrameSource& frames) {
         DepthMap fused_map;
         if (options_.densify) {
           Timer t;
-          std::vector<const ViewImage*> nbs;
+          // Float frames exist only while this view is densified.
+          const GradientDepthOptions& go = options_.depth.gradient;
+          const PhotoconsistencyOptions& po = options_.propagation.photo;
+          std::vector<ViewImage> nb_images;
+          nb_images.reserve(photo_graph.Neighbors(i).size());
           for (int j : photo_graph.Neighbors(i)) {
             const auto it = window.find(j);
-            if (it != window.end()) nbs.push_back(&it->second);
+            if (it != window.end()) nb_images.push_back(MaterializeWindowFrame(it->second, go, po, false));
           }
-          ViewImage fallback;
+          std::vector<const ViewImage*> nbs;
+          for (const ViewImage& v : nb_images) nbs.push_back(&v);
+          ViewImage reference;
           const auto ref = window.find(i);
-          if (ref == window.end()) {  // not expected: the tap precedes the sink
-            fallback.view = views_[i];
-            fallback.image = image;
+          if (ref != window.end()) {
+            reference = MaterializeWindowFrame(ref->second, go, po, true);
+          } else {  // not expected: the tap precedes the sink
+            reference.view = views_[i];
+            reference.image = image;
           }
-          fused_map = propagator.Run(ref != window.end() ? ref->second : fallback, nbs, base, volume_).dense;
+          fused_map = propagator.Run(reference, nbs, base, volume_).dense;
           st.seconds_densify += t.Seconds();
           for (int j : photo_graph.Neighbors(i))
             if (--refcount[j] == 0) window.erase(j);
@@ -205,6 +277,15 @@ PipelineResult EmbeddedPipeline::Run(FrameSource& frames) {
         if (view_callback_) view_callback_(i, done, static_cast<int>(wanted.size()));
       });
   window.clear();
+  {
+    std::map<int, cv::Mat> expanded;  // colour and carving frames share pixels
+    for (auto& [f, pixels] : kept_frames) expanded[f] = ExpandFrame(pixels);
+    kept_frames.clear();
+    for (const auto& [f, image] : expanded) {
+      if (color_ids.count(f)) color_views.push_back({views_[f], image, cv::Mat()});
+      if (carve_ids.count(f)) carve_views.push_back({views_[f], image, cv::Mat()});
+    }
+  }
   st.views = done;
   st.frames_read = ds.frames_read;
   st.max_frames_held_depth = ds.max_frames_held;

@@ -21,6 +21,9 @@
 //   compares H voxel by voxel and the F-scores at the end (memory: the whole store).
 // --budget-mib: FusionOptions::store_budget_bytes (0: unlimited); --loops: turns
 //   of the camera over the N frames (0: the scene's default, one turn).
+// --8bit (pipeline mode): frames quantized to 8 bits as decoded PNG/video frames
+//   are (the renderer's are float); --no-compact: PipelineOptions::compact_frames
+//   off (windows hold CV_32FC3 frames).
 // Every --report-every frames it prints the cumulative seconds per stage, the
 // fusion's grid and store sizes, and the current and peak RSS.
 #include <spdlog/spdlog.h>
@@ -143,11 +146,40 @@ void PrintScores(const char* what, const TriangleMesh& mesh, const synth::SynthS
 
 }  // namespace
 
+namespace lfrecon {
+namespace {
+// Frames of `inner` quantized to 8 bits, as an 8-bit PNG or video frame decodes.
+class EightBitSource : public FrameSource {
+ public:
+  explicit EightBitSource(FrameSource* inner) : inner_(inner) {}
+  int NumFrames() const override { return inner_->NumFrames(); }
+  bool Next(Frame* frame) override {
+    if (!inner_->Next(frame)) return false;
+    Quantize(frame);
+    return true;
+  }
+  Frame Read(int index) override {
+    Frame f = inner_->Read(index);
+    Quantize(&f);
+    return f;
+  }
+
+ private:
+  static void Quantize(Frame* f) {
+    cv::Mat u8;
+    f->image.convertTo(u8, CV_8U, 255.0);
+    f->image = ToFloatBgr(u8);
+  }
+  FrameSource* inner_;
+};
+}  // namespace
+}  // namespace lfrecon
+
 int main(int argc, char** argv) {
   std::string mode = "exact", scene = "tabletop", mesh_out;
   int frames = 3000, width = 1280, height = 720, divisions = 256, report_every = 250, threads = 0, max_block = 16;
   double loops = 0, budget_mib = 1024;
-  bool eval = false, refine = true, compare = false;
+  bool eval = false, refine = true, compare = false, eight_bit = false, compact = true;
   std::vector<double> budgets = {0, 64, 16};
   std::vector<std::string> positional;
   for (int a = 1; a < argc; ++a) {
@@ -173,6 +205,8 @@ int main(int argc, char** argv) {
     else if (k == "--mesh") mesh_out = value();
     else if (k == "--eval") eval = true;
     else if (k == "--no-refine") refine = false;
+    else if (k == "--8bit") eight_bit = true;
+    else if (k == "--no-compact") compact = false;
     else if (k == "--compare-exact") compare = true;
     else if (k == "--budgets-mib") {
       budgets.clear();
@@ -311,6 +345,7 @@ int main(int argc, char** argv) {
   PipelineOptions po;
   po.voxel_divisions = divisions;
   po.refine = refine;
+  po.compact_frames = compact;
   po.write_vdb = false;
   po.write_turntable = false;
   po.fusion.store_budget_bytes = budget;
@@ -323,7 +358,9 @@ int main(int argc, char** argv) {
       std::fflush(stdout);
     }
   });
-  synth::SynthFrameSource source(seq);
+  synth::SynthFrameSource synth_source(seq);
+  EightBitSource eight_bit_source(&synth_source);
+  FrameSource& source = eight_bit ? static_cast<FrameSource&>(eight_bit_source) : synth_source;
   const PipelineResult r = pipeline.Run(source);
   const PipelineStats& st = r.stats;
   const double n = st.views;
@@ -341,6 +378,12 @@ int main(int argc, char** argv) {
               MiB(r.report["counts"]["depth_store_bytes"].get<double>()), st.max_frames_held_depth,
               st.max_frames_held_pipeline);
   std::fflush(stdout);
+  {
+    double sum = 0;  // identity check between runs
+    for (const auto& v : r.mesh_raw.vertices) sum += v.x() + 2 * v.y() + 3 * v.z();
+    std::printf("result: fused pixels %lld, active voxels %zu, mesh_raw %zu vertices, vertex checksum %.17g\n",
+                st.fused_pixels, st.active_voxels, r.mesh_raw.vertices.size(), sum);
+  }
   if (!mesh_out.empty()) WritePly(r.mesh_raw, mesh_out);
   if (eval) {
     PrintScores("fused (mesh_raw)", r.mesh_raw, *seq);

@@ -4,6 +4,7 @@
 #include <spdlog/spdlog.h>
 
 #include <cstdlib>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 
@@ -134,6 +135,67 @@ TEST(EmbeddedPipeline, SphereLoopReachesFScoreAtTwoVoxels) {
   EXPECT_NEAR(report["voxel_size"].get<double>(), options.voxel_size, 1e-12);
   EXPECT_GE(run.metrics.scores[0].fscore, EnvDouble("LFRECON_PIPE_MIN_F", 0.8));
   fs::remove_all(out);
+}
+
+// Frames of `inner`, all but every third quantized to 8 bits (as decoded
+// PNG/video frames are); the others stay float, so both ways the pipeline
+// holds frames (PipelineOptions::compact_frames) are used in one run.
+class MostlyEightBitSource : public FrameSource {
+ public:
+  explicit MostlyEightBitSource(std::unique_ptr<FrameSource> inner) : inner_(std::move(inner)) {}
+  int NumFrames() const override { return inner_->NumFrames(); }
+  bool Next(Frame* frame) override {
+    if (!inner_->Next(frame)) return false;
+    Quantize(frame);
+    return true;
+  }
+  Frame Read(int index) override {
+    Frame f = inner_->Read(index);
+    Quantize(&f);
+    return f;
+  }
+
+ private:
+  static void Quantize(Frame* f) {
+    if (f->index % 3 == 0) return;
+    cv::Mat u8;
+    f->image.convertTo(u8, CV_8U, 255.0);
+    f->image = ToFloatBgr(u8);
+  }
+  std::unique_ptr<FrameSource> inner_;
+};
+
+// Holding 8-bit frames as CV_8UC3 changes nothing: dense maps, grid, carving
+// and colours are bit-identical with the frames held as CV_32FC3.
+TEST(EmbeddedPipeline, EightBitFramesGiveIdenticalResults) {
+  const auto seq = Sphere(180, 80, 45);
+  std::vector<PinholeView> views;
+  for (int i = 0; i < seq->NumFrames(); ++i) views.push_back(seq->View(i));
+  const BoundingBox V = seq->scene().foreground_bbox();
+  auto run = [&](bool compact) {
+    PipelineOptions o;
+    o.voxel_size = 0.008;
+    o.compact_frames = compact;
+    o.carving_views = 6;
+    o.color_views = 4;
+    EmbeddedPipeline pipeline(views, V, o);
+    MostlyEightBitSource frames(seq->OpenFrames());
+    return pipeline.Run(frames);
+  };
+  const PipelineResult a = run(false), b = run(true);
+  EXPECT_EQ(a.stats.fused_pixels, b.stats.fused_pixels);
+  EXPECT_EQ(a.stats.active_voxels, b.stats.active_voxels);
+  EXPECT_EQ(a.stats.voxels_above_threshold, b.stats.voxels_above_threshold);
+  EXPECT_EQ(a.stats.max_frames_held_pipeline, b.stats.max_frames_held_pipeline);
+  EXPECT_EQ(a.stats.carving_frames, b.stats.carving_frames);
+  EXPECT_EQ(a.stats.color_frames, b.stats.color_frames);
+  ASSERT_GT(a.mesh.triangles.size(), 100u);
+  EXPECT_TRUE(a.mesh_raw.vertices == b.mesh_raw.vertices);
+  EXPECT_TRUE(a.mesh.vertices == b.mesh.vertices);
+  EXPECT_TRUE(a.mesh.triangles == b.mesh.triangles);
+  ASSERT_EQ(a.mesh.colors.size(), b.mesh.colors.size());
+  for (std::size_t k = 0; k < a.mesh.colors.size(); ++k)
+    ASSERT_TRUE(std::memcmp(&a.mesh.colors[k], &b.mesh.colors[k], sizeof(a.mesh.colors[k])) == 0) << k;
 }
 
 TEST(EmbeddedPipeline, VoxelSizeFromVolumeAndBadOptions) {
