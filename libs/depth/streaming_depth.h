@@ -30,6 +30,10 @@ struct StreamingDepthStats {
   int filtered_maps = 0;
   int max_frames_held = 0;
   int max_sparse_held = 0;
+  // Frames of wanted views read but not yet emitted (held as CV_8UC3 when they
+  // are 8-bit; at the 3000-frame loop's spacing each waits for the sparse maps
+  // 15° ahead).
+  int max_pending_frames = 0;
   long long neighbors_used = 0;  // summed over the sparse maps (the views each one's hierarchy used)
   double seconds_sparse = 0;
   double seconds_filter = 0;

@@ -289,6 +289,7 @@ PipelineResult EmbeddedPipeline::Run(FrameSource& frames) {
   st.views = done;
   st.frames_read = ds.frames_read;
   st.max_frames_held_depth = ds.max_frames_held;
+  st.max_frames_pending_depth = ds.max_pending_frames;
   st.seconds_sparse = ds.seconds_sparse;
   st.seconds_filter = ds.seconds_filter;
   const FusionStats fs_stats = fusion.Stats();
@@ -374,6 +375,7 @@ PipelineResult EmbeddedPipeline::Run(FrameSource& frames) {
        {{"frames_read", st.frames_read},
         {"max_frames_held_depth", st.max_frames_held_depth},
         {"max_frames_held_pipeline", st.max_frames_held_pipeline},
+        {"max_frames_pending_depth", st.max_frames_pending_depth},
         {"color_frames", st.color_frames},
         {"sparse_pixels", st.sparse_pixels},
         {"filtered_pixels", st.filtered_pixels},

@@ -130,6 +130,7 @@ struct PipelineStats {
   int frames_read = 0;
   int max_frames_held_depth = 0;     // in StreamingDepth's window
   int max_frames_held_pipeline = 0;  // in the pipeline's densification window
+  int max_frames_pending_depth = 0;  // frames of views read but not yet emitted by StreamingDepth
   int color_frames = 0;
   long long sparse_pixels = 0, filtered_pixels = 0, fused_pixels = 0;  // pixels with depth, summed over views
   double voxel_size = 0;

@@ -373,10 +373,10 @@ int main(int argc, char** argv) {
               r.report["seconds"]["fusion_activate"].get<double>(),
               r.report["seconds"]["fusion_backfill"].get<double>(), r.report["seconds"]["fusion_update"].get<double>());
   std::printf("memory: peak RSS %.0f MiB, grid %.1f MiB (%zu active voxels), store %.1f MiB; frames held: depth %d, "
-              "densify %d\n",
+              "densify %d, pending in the depth stage %d\n",
               MiB(st.peak_rss_bytes), MiB(st.grid_bytes), st.active_voxels,
               MiB(r.report["counts"]["depth_store_bytes"].get<double>()), st.max_frames_held_depth,
-              st.max_frames_held_pipeline);
+              st.max_frames_held_pipeline, st.max_frames_pending_depth);
   std::fflush(stdout);
   {
     double sum = 0;  // identity check between runs
