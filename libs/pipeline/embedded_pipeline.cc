@@ -150,6 +150,57 @@ ViewImage MaterializeWindowFrame(const WindowFrame& w, const GradientDepthOption
   return v;
 }
 
+// Whether BidirectionalPhotoconsistency::Compute would take the frame's
+// ViewImage into account (a CV_32FC3 frame), without making it.
+bool UsableWindowFrame(const WindowFrame& w) {
+  return !w.pixels.empty() || (!w.tapped.image.empty() && w.tapped.image.type() == CV_32FC3);
+}
+
+// DepthPropagator::Run(reference, neighbours, filtered, volume).dense, bit for
+// bit, with the photoconsistency fed one neighbour at a time: each neighbour's
+// float frame (and pre-smoothed copy) is made, added and dropped before the
+// next, so only one exists at once (§4.1 reads them together otherwise).
+DepthMap DensifyNeighbourByNeighbour(const DepthPropagator& propagator, const ViewImage& reference,
+                                     const std::vector<const WindowFrame*>& neighbours, const DepthMap& filtered,
+                                     const BoundingBox& volume, const GradientDepthOptions& go) {
+  const PropagationOptions& options = propagator.options();
+  const int rows = reference.image.rows, cols = reference.image.cols;
+  if (rows == 0 || cols == 0 || reference.image.type() != CV_32FC3 || filtered.depth.size() != reference.image.size() ||
+      filtered.depth.type() != CV_32F)
+    return DepthMap(rows, cols);
+  // Depths without a label get one from V (a depth inside V is foreground), as DepthPropagator::Run.
+  constexpr std::uint8_t kFg = static_cast<std::uint8_t>(DepthLabel::kForeground);
+  constexpr std::uint8_t kBg = static_cast<std::uint8_t>(DepthLabel::kBackground);
+  DepthMap labelled;
+  labelled.depth = filtered.depth;
+  labelled.confidence = filtered.confidence;
+  labelled.label = filtered.label.size() == filtered.depth.size() && filtered.label.type() == CV_8U
+                       ? filtered.label.clone()
+                       : cv::Mat::zeros(rows, cols, CV_8U);
+  for (int r = 0; r < rows; ++r)
+    for (int c = 0; c < cols; ++c) {
+      std::uint8_t& l = labelled.label.at<std::uint8_t>(r, c);
+      const float d = labelled.depth.at<float>(r, c);
+      if (l != kFg && l != kBg && d > 0)
+        l = volume.Contains(reference.view.Unproject(Eigen::Vector2d(c + 0.5, r + 0.5), d)) ? kFg : kBg;
+    }
+  // The neighbours in the order Compute adds them up.
+  std::vector<const WindowFrame*> usable;
+  std::vector<const PinholeView*> views;
+  for (const WindowFrame* w : neighbours)
+    if (w && UsableWindowFrame(*w)) {
+      usable.push_back(w);
+      views.push_back(&w->tapped.view);
+    }
+  const BidirectionalPhotoconsistency photo(options.photo);
+  PhotoconsistencyAccumulator acc(options.photo);
+  acc.Begin(reference, labelled);
+  for (int j : photo.SelectNeighbors(reference.view, views))
+    acc.Add(MaterializeWindowFrame(*usable[static_cast<std::size_t>(j)], go, options.photo, false));
+  const EdgeConsistency edges = acc.Finish();
+  return propagator.Filter(reference.image, propagator.Splat(labelled, edges));
+}
+
 }  // namespace
 
 PipelineResult EmbeddedPipeline::Run(FrameSource& frames) {
@@ -230,17 +281,16 @@ PipelineResult EmbeddedPipeline::Run(FrameSource& frames) {
         DepthMap fused_map;
         if (options_.densify) {
           Timer t;
-          // Float frames exist only while this view is densified.
+          // Float frames exist only while this view is densified, and of
+          // its neighbours only one at a time.
           const GradientDepthOptions& go = options_.depth.gradient;
           const PhotoconsistencyOptions& po = options_.propagation.photo;
-          std::vector<ViewImage> nb_images;
-          nb_images.reserve(photo_graph.Neighbors(i).size());
+          std::vector<const WindowFrame*> nbs;
+          nbs.reserve(photo_graph.Neighbors(i).size());
           for (int j : photo_graph.Neighbors(i)) {
             const auto it = window.find(j);
-            if (it != window.end()) nb_images.push_back(MaterializeWindowFrame(it->second, go, po, false));
+            if (it != window.end()) nbs.push_back(&it->second);
           }
-          std::vector<const ViewImage*> nbs;
-          for (const ViewImage& v : nb_images) nbs.push_back(&v);
           ViewImage reference;
           const auto ref = window.find(i);
           if (ref != window.end()) {
@@ -249,7 +299,7 @@ PipelineResult EmbeddedPipeline::Run(FrameSource& frames) {
             reference.view = views_[i];
             reference.image = image;
           }
-          fused_map = propagator.Run(reference, nbs, base, volume_).dense;
+          fused_map = DensifyNeighbourByNeighbour(propagator, reference, nbs, base, volume_, go);
           st.seconds_densify += t.Seconds();
           for (int j : photo_graph.Neighbors(i))
             if (--refcount[j] == 0) window.erase(j);

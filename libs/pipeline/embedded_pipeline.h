@@ -108,8 +108,8 @@ struct PipelineOptions {
   // frames (and their pre-smoothed copies) only while a view is densified:
   // the window takes ~1/4 of the memory (1/9 for frames the depth stage had
   // smoothed), with bit-identical results. Other frames are held as they come.
-  // While one view is densified, all its neighbours' pre-smoothed float frames
-  // exist at once (the photoconsistency reads them together), as before.
+  // While one view is densified, its neighbours' float frames are made one at
+  // a time (PhotoconsistencyAccumulator), whatever this option says.
   // Cost: each neighbour's conversion and pre-smoothing is redone for every
   // view that uses it.
   bool compact_frames = true;

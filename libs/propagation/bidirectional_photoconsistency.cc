@@ -6,7 +6,6 @@
 #include <Eigen/Core>
 #include <algorithm>
 #include <cmath>
-#include <deque>
 #include <opencv2/imgproc.hpp>
 
 #include "util/error.h"
@@ -92,13 +91,33 @@ inline bool Sample3(const cv::Mat& image, float x, float y, Eigen::Vector3f* out
   return true;
 }
 
-// One neighbour: the homogeneous pixel of reference pixel x̃ on the plane at
-// depth d is y = d·A·x̃ + a (A = K_j R_ji K_i⁻¹, a = K_j t_ji).
+// The homogeneous pixel of reference pixel x̃ in a neighbour, on the plane at
+// depth d: y = d·A·x̃ + a (A = K_j R_ji K_i⁻¹, a = K_j t_ji).
 struct NeighborPair {
-  const cv::Mat* image = nullptr;
   Eigen::Matrix3f A;
   Eigen::Vector3f a;
 };
+
+// The image the samples are taken from: `smoothed` when it is there (and
+// presmooth_sigma > 0), else a copy smoothed into *local, or the frame itself.
+const cv::Mat& SourceImage(const ViewImage& v, const PhotoconsistencyOptions& o, cv::Mat* local) {
+  if (o.presmooth_sigma <= 0) return v.image;
+  if (!v.smoothed.empty() && v.smoothed.size() == v.image.size() && v.smoothed.type() == CV_32FC3) return v.smoothed;
+  cv::GaussianBlur(v.image, *local, cv::Size(0, 0), o.presmooth_sigma);
+  return *local;
+}
+
+bool UsableImage(const ViewImage* v) { return v && !v->image.empty() && v->image.type() == CV_32FC3; }
+
+// Degrees between the viewing directions, or a negative value when `nb` is
+// not to be used with `ref` (beyond the angle, or at the reference's centre).
+double UsableAngle(const PinholeView& ref, const PinholeView& nb, double max_angle_deg) {
+  const double cosang = std::clamp(ref.ViewingDirection().dot(nb.ViewingDirection()), -1.0, 1.0);
+  const double angle = std::acos(cosang) * 180.0 / M_PI;
+  if (angle > max_angle_deg) return -1;
+  if ((nb.Center() - ref.Center()).norm() < 1e-9) return -1;  // the reference itself
+  return angle;
+}
 
 }  // namespace
 
@@ -107,124 +126,179 @@ BidirectionalPhotoconsistency::BidirectionalPhotoconsistency(const Photoconsiste
   options_.Check();
 }
 
+std::vector<int> BidirectionalPhotoconsistency::SelectNeighbors(
+    const PinholeView& reference, const std::vector<const PinholeView*>& neighbors) const {
+  const PhotoconsistencyOptions& o = options_;
+  // Usable neighbours within the angle, by increasing angle.
+  std::vector<std::pair<double, int>> usable;
+  for (std::size_t j = 0; j < neighbors.size(); ++j) {
+    if (!neighbors[j]) continue;
+    const double angle = UsableAngle(reference, *neighbors[j], o.max_view_angle_deg);
+    if (angle < 0) continue;
+    usable.emplace_back(angle, static_cast<int>(j));
+  }
+  std::stable_sort(usable.begin(), usable.end(), [](const auto& x, const auto& y) { return x.first < y.first; });
+  std::vector<int> order;
+  if (o.max_views > 0 && static_cast<int>(usable.size()) > o.max_views) {
+    for (int k = 0; k < o.max_views; ++k)
+      order.push_back(usable[static_cast<std::size_t>(k) * usable.size() / o.max_views].second);
+  } else {
+    for (const auto& u : usable) order.push_back(u.second);
+  }
+  return order;
+}
+
 EdgeConsistency BidirectionalPhotoconsistency::Compute(const ViewImage& reference,
                                                        const std::vector<const ViewImage*>& neighbors,
                                                        const DepthMap& depth) const {
+  // Neighbours without a usable frame take no part in the selection.
+  std::vector<const ViewImage*> valid;
+  std::vector<const PinholeView*> views;
+  for (const ViewImage* nb : neighbors)
+    if (UsableImage(nb)) {
+      valid.push_back(nb);
+      views.push_back(&nb->view);
+    }
+  PhotoconsistencyAccumulator acc(options_);
+  acc.Begin(reference, depth);
+  for (int j : SelectNeighbors(reference.view, views)) acc.Add(*valid[static_cast<std::size_t>(j)]);
+  return acc.Finish();
+}
+
+PhotoconsistencyAccumulator::PhotoconsistencyAccumulator(const PhotoconsistencyOptions& options) : options_(options) {
+  options_.Check();
+}
+
+void PhotoconsistencyAccumulator::Begin(const ViewImage& reference, const DepthMap& depth) {
   const PhotoconsistencyOptions& o = options_;
   const int rows = reference.image.rows, cols = reference.image.cols;
-  EdgeConsistency out;
-  out.c_plus = cv::Mat::zeros(rows, cols, CV_32F);
-  out.c_minus = cv::Mat::zeros(rows, cols, CV_32F);
-  out.direction = cv::Mat::zeros(rows, cols, CV_32FC2);
-  out.evaluated = cv::Mat::zeros(rows, cols, CV_8U);
+  out_ = EdgeConsistency();
+  out_.c_plus = cv::Mat::zeros(rows, cols, CV_32F);
+  out_.c_minus = cv::Mat::zeros(rows, cols, CV_32F);
+  out_.direction = cv::Mat::zeros(rows, cols, CV_32FC2);
+  out_.evaluated = cv::Mat::zeros(rows, cols, CV_8U);
+  pixels_.clear();
+  samples_.clear();
+  added_ = 0;
+  valid_ = false;
+  reference_view_ = reference.view;
   if (reference.image.empty() || reference.image.type() != CV_32FC3 || depth.depth.empty() ||
       depth.depth.type() != CV_32F || depth.depth.size() != reference.image.size())
-    return out;
-  out.direction = GradientDirection(reference.image);
-
-  std::deque<cv::Mat> local;  // smoothed copies made here (deque: stable references)
-  auto source = [&](const ViewImage& v) -> const cv::Mat& {
-    if (o.presmooth_sigma <= 0) return v.image;
-    if (!v.smoothed.empty() && v.smoothed.size() == v.image.size() && v.smoothed.type() == CV_32FC3) return v.smoothed;
-    local.emplace_back();
-    cv::GaussianBlur(v.image, local.back(), cv::Size(0, 0), o.presmooth_sigma);
-    return local.back();
-  };
-  const cv::Mat& ref_img = source(reference);
-  const PinholeView& vi = reference.view;
-  // Usable neighbours within the angle, by increasing angle.
-  std::vector<std::pair<double, const ViewImage*>> usable;
-  for (const ViewImage* nb : neighbors) {
-    if (!nb || nb->image.empty() || nb->image.type() != CV_32FC3) continue;
-    const double cosang = std::clamp(vi.ViewingDirection().dot(nb->view.ViewingDirection()), -1.0, 1.0);
-    const double angle = std::acos(cosang) * 180.0 / M_PI;
-    if (angle > o.max_view_angle_deg) continue;
-    if ((nb->view.Center() - vi.Center()).norm() < 1e-9) continue;  // the reference itself
-    usable.emplace_back(angle, nb);
-  }
-  std::stable_sort(usable.begin(), usable.end(),
-                   [](const auto& x, const auto& y) { return x.first < y.first; });
-  if (o.max_views > 0 && static_cast<int>(usable.size()) > o.max_views) {
-    std::vector<std::pair<double, const ViewImage*>> kept;
-    for (int k = 0; k < o.max_views; ++k)
-      kept.push_back(usable[static_cast<std::size_t>(k) * usable.size() / o.max_views]);
-    usable = kept;
-  }
-  std::vector<NeighborPair> pairs;
-  for (const auto& [angle, nb] : usable) {
-    Eigen::Matrix3d R;
-    Eigen::Vector3d t;
-    RelativePose(vi, nb->view, &R, &t);
-    NeighborPair pair;
-    pair.image = &source(*nb);
-    pair.A = (nb->view.K * R * vi.K_inv).cast<float>();
-    pair.a = (nb->view.K * t).cast<float>();
-    pairs.push_back(pair);
-  }
-  if (pairs.empty()) return out;
+    return;
+  valid_ = true;
+  out_.direction = GradientDirection(reference.image);
+  cv::Mat local;
+  const cv::Mat& ref_img = SourceImage(reference, o, &local);
 
   const int S = o.samples_per_side;
   const float step_px = static_cast<float>(o.sample_step_px);
+  std::vector<Eigen::Vector3f> f(2 * S);  // f+ then f−
+  for (int r = 0; r < rows; ++r) {
+    const float* drow = depth.depth.ptr<float>(r);
+    const cv::Vec2f* dir = out_.direction.ptr<cv::Vec2f>(r);
+    for (int c = 0; c < cols; ++c) {
+      const float d = drow[c];
+      if (!(d > 0) || !std::isfinite(d)) continue;
+      const cv::Vec2f n = dir[c];
+      if (n[0] == 0 && n[1] == 0) continue;
+      out_.evaluated.at<std::uint8_t>(r, c) = 255;
+      Pixel px;
+      px.row = r;
+      px.col = c;
+      px.d = d;
+      const Eigen::Vector2f p(c + 0.5f, r + 0.5f);
+      const Eigen::Vector2f step = step_px * Eigen::Vector2f(n[0], n[1]);
+      px.px = p.x();
+      px.py = p.y();
+      px.sx = step.x();
+      px.sy = step.y();
+      // Reference samples f+ (at p + k·step) and f− (at p − k·step).
+      for (int side = 0; side < 2; ++side) {
+        const float sgn = side == 0 ? 1.0f : -1.0f;
+        for (int k = 1; k <= S && px.side_ok[side]; ++k) {
+          const Eigen::Vector2f x = p + (sgn * k) * step;
+          px.side_ok[side] = Sample3(ref_img, x.x(), x.y(), &f[side * S + k - 1]);
+        }
+      }
+      if (!px.side_ok[0] && !px.side_ok[1]) continue;
+      pixels_.push_back(px);
+      for (int k = 0; k < 2 * S; ++k)
+        for (int ch = 0; ch < 3; ++ch) samples_.push_back(px.side_ok[k / S] ? f[k][ch] : 0.0f);
+    }
+  }
+}
+
+void PhotoconsistencyAccumulator::Add(const ViewImage& neighbor) {
+  const PhotoconsistencyOptions& o = options_;
+  if (!valid_ || !UsableImage(&neighbor)) return;
+  if (UsableAngle(reference_view_, neighbor.view, o.max_view_angle_deg) < 0) return;
+  ++added_;
+  if (pixels_.empty()) return;
+  Eigen::Matrix3d R;
+  Eigen::Vector3d t;
+  RelativePose(reference_view_, neighbor.view, &R, &t);
+  NeighborPair pair;
+  pair.A = (neighbor.view.K * R * reference_view_.K_inv).cast<float>();
+  pair.a = (neighbor.view.K * t).cast<float>();
+  cv::Mat local;
+  const cv::Mat& image = SourceImage(neighbor, o, &local);
+
+  const int S = o.samples_per_side;
   // exp(−‖f − g‖² / (2σ_p²)) (eq. 9), ‖·‖² per sample pixel (see header).
   const float inv_two_sigma2 = static_cast<float>(1.0 / (2.0 * o.sigma_p * o.sigma_p * S));
-  tbb::parallel_for(tbb::blocked_range<int>(0, rows), [&](const tbb::blocked_range<int>& range) {
-    std::vector<Eigen::Vector3f> f(2 * S);  // f+ then f−
-    for (int r = range.begin(); r != range.end(); ++r) {
-      const float* drow = depth.depth.ptr<float>(r);
-      const cv::Vec2f* dir = out.direction.ptr<cv::Vec2f>(r);
-      float* cplus = out.c_plus.ptr<float>(r);
-      float* cminus = out.c_minus.ptr<float>(r);
-      std::uint8_t* ev = out.evaluated.ptr<std::uint8_t>(r);
-      for (int c = 0; c < cols; ++c) {
-        const float d = drow[c];
-        if (!(d > 0) || !std::isfinite(d)) continue;
-        const cv::Vec2f n = dir[c];
-        if (n[0] == 0 && n[1] == 0) continue;
-        ev[c] = 255;
-        const Eigen::Vector2f p(c + 0.5f, r + 0.5f);
-        const Eigen::Vector2f step = step_px * Eigen::Vector2f(n[0], n[1]);
-        // Reference samples f+ (at p + k·step) and f− (at p − k·step).
-        bool side_ok[2] = {true, true};
-        for (int side = 0; side < 2; ++side) {
-          const float sgn = side == 0 ? 1.0f : -1.0f;
-          for (int k = 1; k <= S && side_ok[side]; ++k) {
-            const Eigen::Vector2f x = p + (sgn * k) * step;
-            side_ok[side] = Sample3(ref_img, x.x(), x.y(), &f[side * S + k - 1]);
+  const std::size_t per_pixel = static_cast<std::size_t>(6 * S);
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, pixels_.size(), 256),
+                    [&](const tbb::blocked_range<std::size_t>& range) {
+    for (std::size_t i = range.begin(); i != range.end(); ++i) {
+      Pixel& px = pixels_[i];
+      const float* fs = samples_.data() + i * per_pixel;
+      const float d = px.d;
+      // Through the plane at d: y(x) = d·A·x̃ + a is linear in x, so step along θ.
+      const Eigen::Vector3f y0 = d * (pair.A * Eigen::Vector3f(px.px, px.py, 1.0f)) + pair.a;
+      const Eigen::Vector3f dy = d * (pair.A.leftCols<2>() * Eigen::Vector2f(px.sx, px.sy));
+      for (int side = 0; side < 2; ++side) {
+        if (!px.side_ok[side]) continue;
+        const float sgn = side == 0 ? 1.0f : -1.0f;
+        float ssd = 0;
+        bool ok = true;
+        for (int k = 1; k <= S; ++k) {
+          const Eigen::Vector3f y = y0 + (sgn * k) * dy;
+          Eigen::Vector3f g;
+          if (!(y.z() > 0) || !Sample3(image, y.x() / y.z(), y.y() / y.z(), &g)) {
+            ok = false;
+            break;
           }
+          const float* fk = fs + 3 * (side * S + k - 1);
+          ssd += (Eigen::Vector3f(fk[0], fk[1], fk[2]) - g).squaredNorm();
         }
-        if (!side_ok[0] && !side_ok[1]) continue;
-        // Through the plane at d: y(x) = d·A·x̃ + a is linear in x, so step along θ.
-        float sum_rho[2] = {0, 0};
-        int count[2] = {0, 0};
-        for (const NeighborPair& pair : pairs) {
-          const Eigen::Vector3f y0 = d * (pair.A * Eigen::Vector3f(p.x(), p.y(), 1.0f)) + pair.a;
-          const Eigen::Vector3f dy = d * (pair.A.leftCols<2>() * step);
-          for (int side = 0; side < 2; ++side) {
-            if (!side_ok[side]) continue;
-            const float sgn = side == 0 ? 1.0f : -1.0f;
-            float ssd = 0;
-            bool ok = true;
-            for (int k = 1; k <= S; ++k) {
-              const Eigen::Vector3f y = y0 + (sgn * k) * dy;
-              Eigen::Vector3f g;
-              if (!(y.z() > 0) || !Sample3(*pair.image, y.x() / y.z(), y.y() / y.z(), &g)) {
-                ok = false;
-                break;
-              }
-              ssd += (f[side * S + k - 1] - g).squaredNorm();
-            }
-            if (!ok) continue;
-            sum_rho[side] += std::exp(-ssd * inv_two_sigma2);
-            ++count[side];
-          }
-        }
-        // C+(p), C−(p): averages over the views (§4.1).
-        cplus[c] = count[0] ? sum_rho[0] / count[0] : 0.0f;
-        cminus[c] = count[1] ? sum_rho[1] / count[1] : 0.0f;
+        if (!ok) continue;
+        px.sum_rho[side] += std::exp(-ssd * inv_two_sigma2);
+        ++px.count[side];
       }
     }
   });
-  return out;
+}
+
+EdgeConsistency PhotoconsistencyAccumulator::Finish() {
+  // Evaluated: every pixel with depth and a direction, once a neighbour took part.
+  if (added_ == 0) {
+    out_.evaluated.setTo(0);
+  } else {
+    for (const Pixel& px : pixels_) {
+      // C+(p), C−(p): averages over the views (§4.1).
+      out_.c_plus.at<float>(px.row, px.col) = px.count[0] ? px.sum_rho[0] / px.count[0] : 0.0f;
+      out_.c_minus.at<float>(px.row, px.col) = px.count[1] ? px.sum_rho[1] / px.count[1] : 0.0f;
+    }
+  }
+  EdgeConsistency result = std::move(out_);
+  out_ = EdgeConsistency();
+  pixels_.clear();
+  pixels_.shrink_to_fit();
+  samples_.clear();
+  samples_.shrink_to_fit();
+  valid_ = false;
+  added_ = 0;
+  return result;
 }
 
 }  // namespace lfrecon

@@ -84,10 +84,58 @@ class BidirectionalPhotoconsistency {
   EdgeConsistency Compute(const ViewImage& reference, const std::vector<const ViewImage*>& neighbors,
                           const DepthMap& depth) const;
 
+  // The neighbours Compute would use, as indices into `neighbors`, in the
+  // order it adds them up (by increasing angle, thinned to max_views): the
+  // order in which to feed them to PhotoconsistencyAccumulator::Add. Only the
+  // views are read; a null pointer is skipped.
+  std::vector<int> SelectNeighbors(const PinholeView& reference, const std::vector<const PinholeView*>& neighbors) const;
+
   const PhotoconsistencyOptions& options() const { return options_; }
 
  private:
   PhotoconsistencyOptions options_;
+};
+
+// Compute, one neighbour at a time, so that a caller needs only one
+// neighbour's frame (and its smoothed copy) at once: Begin(reference, depth),
+// Add(neighbour) for each neighbour in the order of SelectNeighbors, Finish().
+// Each pixel adds up ρ over the neighbours in the order they are added, so with
+// that order the result is bit for bit Compute's. Add ignores a null, empty or
+// non-CV_32FC3 neighbour, one beyond max_view_angle_deg and the reference
+// itself (none of them counts towards max_views here: select first).
+class PhotoconsistencyAccumulator {
+ public:
+  explicit PhotoconsistencyAccumulator(const PhotoconsistencyOptions& options);
+
+  // Starts over for `reference` (its frame is read only here: its smoothed
+  // samples are kept for the pixels to evaluate) and the depths of `depth`.
+  void Begin(const ViewImage& reference, const DepthMap& depth);
+  // Adds one neighbour's ρ to the sums; its frame is not kept.
+  void Add(const ViewImage& neighbor);
+  // C± of what was added; the accumulator is empty afterwards.
+  EdgeConsistency Finish();
+
+  int neighbors_added() const { return added_; }
+
+ private:
+  // A pixel to evaluate (depth and a gradient direction, a side inside the
+  // reference) and its running sums.
+  struct Pixel {
+    int row = 0, col = 0;
+    float d = 0;
+    float px = 0, py = 0;      // pixel centre
+    float sx = 0, sy = 0;      // one sample step along θ(p)
+    bool side_ok[2] = {true, true};
+    float sum_rho[2] = {0, 0};
+    int count[2] = {0, 0};
+  };
+  PhotoconsistencyOptions options_;
+  PinholeView reference_view_;
+  EdgeConsistency out_;
+  std::vector<Pixel> pixels_;
+  std::vector<float> samples_;  // f+ then f−, 3·2·samples_per_side floats per pixel
+  bool valid_ = false;
+  int added_ = 0;
 };
 
 // Unit gradient direction (cos θ, sin θ) of the grey image (eq. 8), CV_32FC2,

@@ -3,7 +3,10 @@
 #include <gtest/gtest.h>
 
 #include <Eigen/Geometry>
+#include <algorithm>
+#include <cmath>
 #include <cstdio>
+#include <cstring>
 
 #include "../depth/synth_views.h"
 #include "util/error.h"
@@ -217,6 +220,73 @@ TEST(BidirectionalPhotoconsistency, DegenerateInputGivesZeroMaps) {
   EXPECT_EQ(cv::countNonZero(flat.evaluated), 0);
   // A depth map of the wrong size is ignored.
   expect_zero(pc.Compute(v.ref, v.NeighborPtrs(), DepthMap(10, 10)), 90, 160);
+}
+
+bool SameBits(const cv::Mat& a, const cv::Mat& b) {
+  if (a.size() != b.size() || a.type() != b.type()) return false;
+  for (int r = 0; r < a.rows; ++r)
+    if (std::memcmp(a.ptr(r), b.ptr(r), a.cols * a.elemSize()) != 0) return false;
+  return true;
+}
+
+TEST(BidirectionalPhotoconsistency, SelectsNeighboursByAngleThinnedToMaxViews) {
+  const SynthViews v = MakeSynthViews("occlusion");
+  ASSERT_GE(v.neighbors.size(), 6u);
+  // Reversed, with a null pointer and the reference itself among them.
+  std::vector<const PinholeView*> views = {nullptr, &v.ref.view};
+  for (auto it = v.neighbors.rbegin(); it != v.neighbors.rend(); ++it) views.push_back(&it->view);
+  PhotoconsistencyOptions o;
+  const std::vector<int> all = BidirectionalPhotoconsistency(o).SelectNeighbors(v.ref.view, views);
+  ASSERT_EQ(all.size(), v.neighbors.size());
+  double last = -1;
+  for (int j : all) {
+    ASSERT_GE(j, 2);
+    const double angle =
+        std::acos(std::clamp(v.ref.view.ViewingDirection().dot(views[j]->ViewingDirection()), -1.0, 1.0));
+    EXPECT_GE(angle, last);
+    last = angle;
+  }
+  o.max_views = 3;
+  const std::vector<int> three = BidirectionalPhotoconsistency(o).SelectNeighbors(v.ref.view, views);
+  ASSERT_EQ(three.size(), 3u);
+  for (std::size_t k = 0; k < 3; ++k) EXPECT_EQ(three[k], all[k * all.size() / 3]);
+}
+
+TEST(BidirectionalPhotoconsistency, AccumulatorOneNeighbourAtATimeIsBitIdenticalToCompute) {
+  const SynthViews v = MakeSynthViews("occlusion");
+  const DepthMap depth = TruthAtEdges(v);
+  for (const int max_views : {0, 5}) {
+    PhotoconsistencyOptions o;
+    o.max_views = max_views;
+    const BidirectionalPhotoconsistency pc(o);
+    const EdgeConsistency all = pc.Compute(v.ref, v.NeighborPtrs(), depth);
+    std::vector<const PinholeView*> views;
+    for (const ViewImage& n : v.neighbors) views.push_back(&n.view);
+    PhotoconsistencyAccumulator acc(o);
+    acc.Begin(v.ref, depth);
+    for (int j : pc.SelectNeighbors(v.ref.view, views)) {
+      // The neighbour's frame exists only for its Add (smoothed there: no `smoothed`).
+      ViewImage one;
+      one.view = v.neighbors[j].view;
+      one.image = v.neighbors[j].image.clone();
+      acc.Add(one);
+    }
+    EXPECT_EQ(acc.neighbors_added(), max_views ? max_views : static_cast<int>(v.neighbors.size()));
+    const EdgeConsistency streamed = acc.Finish();
+    EXPECT_GT(cv::countNonZero(streamed.evaluated), 1000);
+    EXPECT_TRUE(SameBits(all.c_plus, streamed.c_plus));
+    EXPECT_TRUE(SameBits(all.c_minus, streamed.c_minus));
+    EXPECT_TRUE(SameBits(all.direction, streamed.direction));
+    EXPECT_TRUE(SameBits(all.evaluated, streamed.evaluated));
+  }
+  // Nothing added: nothing evaluated; the accumulator starts over on Begin.
+  PhotoconsistencyAccumulator acc{PhotoconsistencyOptions()};
+  acc.Begin(v.ref, depth);
+  acc.Add(v.ref);  // the reference itself does not count
+  const EdgeConsistency none = acc.Finish();
+  EXPECT_EQ(acc.neighbors_added(), 0);
+  EXPECT_EQ(cv::countNonZero(none.evaluated), 0);
+  EXPECT_EQ(cv::countNonZero(none.c_plus), 0);
 }
 
 TEST(BidirectionalPhotoconsistency, OptionsAreChecked) {
