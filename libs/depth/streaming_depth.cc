@@ -3,7 +3,6 @@
 #include <spdlog/spdlog.h>
 
 #include <algorithm>
-#include <cstring>
 #include <map>
 #include <set>
 
@@ -23,27 +22,6 @@ StreamingDepth::StreamingDepth(std::vector<PinholeView> views, const BoundingBox
     : views_(std::move(views)), volume_(volume), options_(options) {
   options_.Check();
 }
-
-namespace {
-
-// The frame of a view waiting to be emitted: CV_8UC3 when the CV_32FC3 frame
-// is exactly ToFloatBgr of an 8-bit image (as decoded PNG/JPEG/video frames
-// are; a quarter of the memory), else the frame itself. ExpandPending gives
-// back the same floats bit for bit.
-cv::Mat CompactPending(const cv::Mat& frame) {
-  if (frame.type() != CV_32FC3) return frame;
-  cv::Mat u8;
-  frame.convertTo(u8, CV_8U, 255.0);
-  const cv::Mat back = ToFloatBgr(u8);
-  const std::size_t row_bytes = static_cast<std::size_t>(frame.cols) * frame.elemSize();
-  for (int r = 0; r < frame.rows; ++r)
-    if (std::memcmp(back.ptr(r), frame.ptr(r), row_bytes) != 0) return frame;
-  return u8;
-}
-
-cv::Mat ExpandPending(const cv::Mat& pixels) { return pixels.depth() == CV_8U ? ToFloatBgr(pixels) : pixels; }
-
-}  // namespace
 
 StreamingDepthStats StreamingDepth::Run(FrameSource& frames, const std::vector<int>& wanted_in, const Sink& sink) {
   const int n = static_cast<int>(views_.size());
@@ -118,7 +96,7 @@ StreamingDepthStats StreamingDepth::Run(FrameSource& frames, const std::vector<i
 
   std::map<int, ViewImage> held;
   std::map<int, DepthMap> sparse;
-  std::map<int, cv::Mat> wanted_frames;  // frames of wanted views until they are emitted (CompactPending)
+  std::map<int, cv::Mat> wanted_frames;  // frames of wanted views until they are emitted (CompactFrame)
   Progress progress("depth", static_cast<long long>(wanted.size()));
   Frame frame;
   for (int f = 0; f <= last_frame; ++f) {
@@ -147,7 +125,7 @@ StreamingDepthStats StreamingDepth::Run(FrameSource& frames, const std::vector<i
         frame_tap_(f, v);
       }
     }
-    if (is_wanted[f]) wanted_frames[f] = CompactPending(frame.image);
+    if (is_wanted[f]) wanted_frames[f] = CompactFrame(frame.image);
     stats.max_frames_held = std::max(stats.max_frames_held, static_cast<int>(held.size()));
     stats.max_pending_frames = std::max(stats.max_pending_frames, static_cast<int>(wanted_frames.size()));
 
@@ -184,7 +162,7 @@ StreamingDepthStats StreamingDepth::Run(FrameSource& frames, const std::vector<i
         stats.seconds_filter += timer.Seconds();
         ++stats.filtered_maps;
       }
-      sink(i, ExpandPending(wanted_frames.at(i)), sparse.at(i), filtered);
+      sink(i, ExpandFrame(wanted_frames.at(i)), sparse.at(i), filtered);
       wanted_frames.erase(i);
       progress.Advance();
     }

@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <cctype>
+#include <cstring>
 #include <cstdio>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
@@ -81,6 +82,19 @@ cv::Mat ToFloatBgr(const cv::Mat& image) {
   }
   return out;
 }
+
+cv::Mat CompactFrame(const cv::Mat& frame) {
+  if (frame.type() != CV_32FC3) return frame;
+  cv::Mat u8;
+  frame.convertTo(u8, CV_8U, 255.0);
+  const cv::Mat back = ToFloatBgr(u8);
+  const std::size_t row_bytes = static_cast<std::size_t>(frame.cols) * frame.elemSize();
+  for (int r = 0; r < frame.rows; ++r)
+    if (std::memcmp(back.ptr(r), frame.ptr(r), row_bytes) != 0) return frame;
+  return u8;
+}
+
+cv::Mat ExpandFrame(const cv::Mat& pixels) { return pixels.depth() == CV_8U ? ToFloatBgr(pixels) : pixels; }
 
 cv::Mat ReadImageFloat(const fs::path& path) {
   std::error_code ec;

@@ -33,6 +33,12 @@ bool NaturalNameLess(const std::string& a, const std::string& b);
 
 // Converts an 8- or 16-bit, 1/3/4-channel image to CV_32FC3 BGR in [0, 1].
 cv::Mat ToFloatBgr(const cv::Mat& image);
+// A frame as windows hold it: CV_8UC3 when the CV_32FC3 frame is exactly
+// ToFloatBgr of an 8-bit image (as decoded PNG/JPEG/video frames are; a
+// quarter of the memory), else the frame itself. ExpandFrame gives back the
+// same floats bit for bit.
+cv::Mat CompactFrame(const cv::Mat& frame);
+cv::Mat ExpandFrame(const cv::Mat& pixels);
 // Reads one image file as CV_32FC3 BGR in [0, 1]; throws InputError naming it.
 cv::Mat ReadImageFloat(const std::filesystem::path& path);
 // Writes CV_32FC3 [0, 1] (or 8-bit) to PNG/JPEG (by extension); throws InputError naming it.

@@ -8,7 +8,6 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
-#include <cstring>
 #include <fstream>
 #include <map>
 #include <set>
@@ -89,23 +88,6 @@ nlohmann::json BoxJson(const BoundingBox& b) {
   return {{"min", {b.min.x(), b.min.y(), b.min.z()}}, {"max", {b.max.x(), b.max.y(), b.max.z()}}};
 }
 
-// The pixels of a frame as the windows hold them: CV_8UC3 when the CV_32FC3
-// frame is exactly an 8-bit one as the frame sources make it (ToFloatBgr of
-// it gives back the same floats, bit for bit), else the frame itself. A
-// quarter of the memory for 8-bit input, and the same results.
-cv::Mat CompactFrame(const cv::Mat& frame) {
-  if (frame.type() != CV_32FC3) return frame;
-  cv::Mat u8;
-  frame.convertTo(u8, CV_8U, 255.0);
-  const cv::Mat back = ToFloatBgr(u8);
-  const std::size_t row_bytes = static_cast<std::size_t>(frame.cols) * frame.elemSize();
-  for (int r = 0; r < frame.rows; ++r)
-    if (std::memcmp(back.ptr(r), frame.ptr(r), row_bytes) != 0) return frame;
-  return u8;
-}
-
-// The CV_32FC3 frame of CompactFrame's result.
-cv::Mat ExpandFrame(const cv::Mat& pixels) { return pixels.depth() == CV_8U ? ToFloatBgr(pixels) : pixels; }
 
 // A frame of the densification window.
 struct WindowFrame {
@@ -165,25 +147,8 @@ DepthMap DensifyNeighbourByNeighbour(const DepthPropagator& propagator, const Vi
                                      const BoundingBox& volume, const GradientDepthOptions& go) {
   const PropagationOptions& options = propagator.options();
   const int rows = reference.image.rows, cols = reference.image.cols;
-  if (rows == 0 || cols == 0 || reference.image.type() != CV_32FC3 || filtered.depth.size() != reference.image.size() ||
-      filtered.depth.type() != CV_32F)
-    return DepthMap(rows, cols);
-  // Depths without a label get one from V (a depth inside V is foreground), as DepthPropagator::Run.
-  constexpr std::uint8_t kFg = static_cast<std::uint8_t>(DepthLabel::kForeground);
-  constexpr std::uint8_t kBg = static_cast<std::uint8_t>(DepthLabel::kBackground);
-  DepthMap labelled;
-  labelled.depth = filtered.depth;
-  labelled.confidence = filtered.confidence;
-  labelled.label = filtered.label.size() == filtered.depth.size() && filtered.label.type() == CV_8U
-                       ? filtered.label.clone()
-                       : cv::Mat::zeros(rows, cols, CV_8U);
-  for (int r = 0; r < rows; ++r)
-    for (int c = 0; c < cols; ++c) {
-      std::uint8_t& l = labelled.label.at<std::uint8_t>(r, c);
-      const float d = labelled.depth.at<float>(r, c);
-      if (l != kFg && l != kBg && d > 0)
-        l = volume.Contains(reference.view.Unproject(Eigen::Vector2d(c + 0.5, r + 0.5), d)) ? kFg : kBg;
-    }
+  if (!DepthPropagator::ValidInput(reference, filtered)) return DepthMap(rows, cols);
+  const DepthMap labelled = DepthPropagator::LabelFromVolume(reference.view, filtered, volume);
   // The neighbours in the order Compute adds them up.
   std::vector<const WindowFrame*> usable;
   std::vector<const PinholeView*> views;

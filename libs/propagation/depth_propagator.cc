@@ -286,20 +286,13 @@ DepthMap DepthPropagator::Filter(const cv::Mat& image, const SplatMaps& splats) 
   return out;
 }
 
-DenseDepthResult DepthPropagator::Run(const ViewImage& reference, const std::vector<const ViewImage*>& neighbors,
-                                      const DepthMap& filtered, const BoundingBox& volume) const {
-  DenseDepthResult result;
-  const int rows = reference.image.rows, cols = reference.image.cols;
-  result.dense = DepthMap(rows, cols);
-  if (rows == 0 || cols == 0 || reference.image.type() != CV_32FC3 || filtered.depth.size() != reference.image.size() ||
-      filtered.depth.type() != CV_32F) {
-    result.edges.c_plus = cv::Mat::zeros(rows, cols, CV_32F);
-    result.edges.c_minus = cv::Mat::zeros(rows, cols, CV_32F);
-    result.edges.direction = cv::Mat::zeros(rows, cols, CV_32FC2);
-    result.edges.evaluated = cv::Mat::zeros(rows, cols, CV_8U);
-    return result;
-  }
-  // Depths without a label get one from V (a depth inside V is foreground).
+bool DepthPropagator::ValidInput(const ViewImage& reference, const DepthMap& filtered) {
+  return reference.image.rows > 0 && reference.image.cols > 0 && reference.image.type() == CV_32FC3 &&
+         filtered.depth.size() == reference.image.size() && filtered.depth.type() == CV_32F;
+}
+
+DepthMap DepthPropagator::LabelFromVolume(const PinholeView& view, const DepthMap& filtered, const BoundingBox& volume) {
+  const int rows = filtered.depth.rows, cols = filtered.depth.cols;
   DepthMap labelled;
   labelled.depth = filtered.depth;
   labelled.confidence = filtered.confidence;
@@ -311,8 +304,24 @@ DenseDepthResult DepthPropagator::Run(const ViewImage& reference, const std::vec
       std::uint8_t& l = labelled.label.at<std::uint8_t>(r, c);
       const float d = labelled.depth.at<float>(r, c);
       if (l != kFg && l != kBg && d > 0)
-        l = volume.Contains(reference.view.Unproject(Eigen::Vector2d(c + 0.5, r + 0.5), d)) ? kFg : kBg;
+        l = volume.Contains(view.Unproject(Eigen::Vector2d(c + 0.5, r + 0.5), d)) ? kFg : kBg;
     }
+  return labelled;
+}
+
+DenseDepthResult DepthPropagator::Run(const ViewImage& reference, const std::vector<const ViewImage*>& neighbors,
+                                      const DepthMap& filtered, const BoundingBox& volume) const {
+  DenseDepthResult result;
+  const int rows = reference.image.rows, cols = reference.image.cols;
+  result.dense = DepthMap(rows, cols);
+  if (!ValidInput(reference, filtered)) {
+    result.edges.c_plus = cv::Mat::zeros(rows, cols, CV_32F);
+    result.edges.c_minus = cv::Mat::zeros(rows, cols, CV_32F);
+    result.edges.direction = cv::Mat::zeros(rows, cols, CV_32FC2);
+    result.edges.evaluated = cv::Mat::zeros(rows, cols, CV_8U);
+    return result;
+  }
+  const DepthMap labelled = LabelFromVolume(reference.view, filtered, volume);
 
   Timer timer;
   result.edges = BidirectionalPhotoconsistency(options_.photo).Compute(reference, neighbors, labelled);

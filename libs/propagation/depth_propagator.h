@@ -150,6 +150,12 @@ class DepthPropagator {
   DenseDepthResult Run(const ViewImage& reference, const std::vector<const ViewImage*>& neighbors,
                        const DepthMap& filtered, const BoundingBox& volume) const;
 
+  // Whether Run can work on the input (a CV_32FC3 reference and a CV_32F
+  // depth map of its size); otherwise Run gives an empty map.
+  static bool ValidInput(const ViewImage& reference, const DepthMap& filtered);
+  // Run's step 0: `filtered` with every depth that has no label labelled from V
+  // (a depth whose point lies inside V is foreground). Needs ValidInput.
+  static DepthMap LabelFromVolume(const PinholeView& view, const DepthMap& filtered, const BoundingBox& volume);
   // Step 2 alone: splats C± of `edges` around the depths of `filtered`.
   SplatMaps Splat(const DepthMap& filtered, const EdgeConsistency& edges) const;
   // Step 3 alone: eq. 10 on each side with `image` (CV_32FC3) as the guide, then the per-pixel choice.
