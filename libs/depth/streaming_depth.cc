@@ -96,6 +96,7 @@ StreamingDepthStats StreamingDepth::Run(FrameSource& frames, const std::vector<i
 
   std::map<int, ViewImage> held;
   std::map<int, DepthMap> sparse;
+  std::map<int, cv::Mat> reference_frames;  // frames of held views whose sparse map is still to come (CompactFrame)
   std::map<int, cv::Mat> wanted_frames;  // frames of wanted views until they are emitted (CompactFrame)
   Progress progress("depth", static_cast<long long>(wanted.size()));
   Frame frame;
@@ -125,7 +126,20 @@ StreamingDepthStats StreamingDepth::Run(FrameSource& frames, const std::vector<i
         frame_tap_(f, v);
       }
     }
-    if (is_wanted[f]) wanted_frames[f] = CompactFrame(frame.image);
+    const auto h = held.find(f);
+    const bool reference_later = h != held.end() && need_sparse[f];
+    cv::Mat compact;
+    if (is_wanted[f] || reference_later) compact = CompactFrame(frame.image);
+    if (is_wanted[f]) wanted_frames[f] = compact;
+    if (h != held.end()) {
+      // As a neighbour a held frame is read only through its smoothed copy and
+      // grey levels; the frame itself is needed again only when the view is a
+      // reference (its gradients), so it waits compact (a quarter of the
+      // float frame when 8-bit; shared with wanted_frames) and `image` points
+      // at `smoothed` meanwhile.
+      if (reference_later) reference_frames[f] = compact;
+      h->second.image = h->second.smoothed;
+    }
     stats.max_frames_held = std::max(stats.max_frames_held, static_cast<int>(held.size()));
     stats.max_pending_frames = std::max(stats.max_pending_frames, static_cast<int>(wanted_frames.size()));
 
@@ -134,7 +148,10 @@ StreamingDepthStats StreamingDepth::Run(FrameSource& frames, const std::vector<i
       std::vector<const ViewImage*> nbs;
       for (int j : uses[s]) nbs.push_back(&held.at(j));
       stats.neighbors_used += static_cast<long long>(uses[s].size());
-      sparse[s] = estimator.Estimate(held.at(s), nbs, volume_);
+      ViewImage reference = held.at(s);
+      reference.image = ExpandFrame(reference_frames.at(s));
+      reference_frames.erase(s);
+      sparse[s] = estimator.Estimate(reference, nbs, volume_);
       stats.seconds_sparse += timer.Seconds();
       ++stats.sparse_maps;
     }
