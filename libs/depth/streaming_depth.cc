@@ -95,7 +95,10 @@ StreamingDepthStats StreamingDepth::Run(FrameSource& frames, const std::vector<i
   if (options_.run_filter) grid = std::make_unique<VoteGrid>(volume_, options_.filter);
 
   std::map<int, ViewImage> held;
-  std::map<int, DepthMap> sparse;
+  // Sparse maps wait packed (valid pixels only): at 0.12° spacing ~250 of
+  // them lie within the filter's 15°, 8.3 MB each at 1280×720 as DepthMaps.
+  std::map<int, PackedDepthMap> sparse;
+  std::size_t sparse_bytes = 0;
   std::map<int, cv::Mat> reference_frames;  // frames of held views whose sparse map is still to come (CompactFrame)
   std::map<int, cv::Mat> wanted_frames;  // frames of wanted views until they are emitted (CompactFrame)
   Progress progress("depth", static_cast<long long>(wanted.size()));
@@ -151,12 +154,15 @@ StreamingDepthStats StreamingDepth::Run(FrameSource& frames, const std::vector<i
       ViewImage reference = held.at(s);
       reference.image = ExpandFrame(reference_frames.at(s));
       reference_frames.erase(s);
-      sparse[s] = estimator.Estimate(reference, nbs, volume_);
+      sparse[s] = PackedDepthMap::Pack(estimator.Estimate(reference, nbs, volume_));
+      sparse_bytes += sparse[s].Bytes();
       stats.seconds_sparse += timer.Seconds();
       ++stats.sparse_maps;
     }
     stats.max_sparse_held = std::max(stats.max_sparse_held, static_cast<int>(sparse.size()));
+    stats.max_sparse_bytes = std::max(stats.max_sparse_bytes, sparse_bytes);
     for (int i : filter_at[f]) {
+      const DepthMap own = sparse.at(i).Unpack();
       DepthMap filtered;
       if (options_.run_filter) {
         Timer timer;
@@ -164,7 +170,7 @@ StreamingDepthStats StreamingDepth::Run(FrameSource& frames, const std::vector<i
         voters.insert(i);
         for (auto it = in_grid.begin(); it != in_grid.end();) {
           if (!voters.count(*it)) {
-            grid->Splat(sparse.at(*it), views_[*it], -1.0f);
+            grid->Splat(sparse.at(*it).Unpack(), views_[*it], -1.0f);
             it = in_grid.erase(it);
           } else {
             ++it;
@@ -172,21 +178,24 @@ StreamingDepthStats StreamingDepth::Run(FrameSource& frames, const std::vector<i
         }
         for (int v : voters)
           if (!in_grid.count(v)) {
-            grid->Splat(sparse.at(v), views_[v], 1.0f);
+            grid->Splat(sparse.at(v).Unpack(), views_[v], 1.0f);
             in_grid.insert(v);
           }
-        filtered = grid->Filter(sparse.at(i), views_[i]);
+        filtered = grid->Filter(own, views_[i]);
         stats.seconds_filter += timer.Seconds();
         ++stats.filtered_maps;
       }
-      sink(i, ExpandFrame(wanted_frames.at(i)), sparse.at(i), filtered);
+      sink(i, ExpandFrame(wanted_frames.at(i)), own, filtered);
       wanted_frames.erase(i);
       progress.Advance();
     }
     // Release what no pending view needs any more.
     for (auto it = held.begin(); it != held.end();) it = frame_last_use[it->first] <= f ? held.erase(it) : std::next(it);
     for (auto it = sparse.begin(); it != sparse.end();) {
-      if (sparse_last_use[it->first] <= f && !in_grid.count(it->first)) it = sparse.erase(it);
+      if (sparse_last_use[it->first] <= f && !in_grid.count(it->first)) {
+        sparse_bytes -= it->second.Bytes();
+        it = sparse.erase(it);
+      }
       else ++it;
     }
   }

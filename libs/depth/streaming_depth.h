@@ -34,6 +34,8 @@ struct StreamingDepthStats {
   // are 8-bit; at the 3000-frame loop's spacing each waits for the sparse maps
   // 15° ahead).
   int max_pending_frames = 0;
+  // Peak heap bytes of the sparse maps held (packed: valid pixels only).
+  std::size_t max_sparse_bytes = 0;
   long long neighbors_used = 0;  // summed over the sparse maps (the views each one's hierarchy used)
   double seconds_sparse = 0;
   double seconds_filter = 0;
