@@ -118,21 +118,21 @@ StreamingDepthStats StreamingDepth::Run(FrameSource& frames, const std::vector<i
       v.on_grid = on_grid[f];
       PrepareViewImage(&v, options_.gradient);
     }
+    // The frame as it waits (CompactFrame: CV_8UC3 when it is 8-bit), one
+    // copy shared by the frames to emit, the references to come and the tap.
+    const cv::Mat compact = CompactFrame(frame.image);
+    const auto h = held.find(f);
     if (frame_tap_) {
-      const auto h = held.find(f);
       if (h != held.end()) {
-        frame_tap_(f, h->second);
+        frame_tap_(f, h->second, compact);
       } else {
         ViewImage v;
         v.view = views_[f];
         v.image = frame.image;
-        frame_tap_(f, v);
+        frame_tap_(f, v, compact);
       }
     }
-    const auto h = held.find(f);
     const bool reference_later = h != held.end() && need_sparse[f];
-    cv::Mat compact;
-    if (is_wanted[f] || reference_later) compact = CompactFrame(frame.image);
     if (is_wanted[f]) wanted_frames[f] = compact;
     if (h != held.end()) {
       // As a neighbour a held frame is read only through its smoothed copy and

@@ -57,8 +57,10 @@ class StreamingDepth {
   // (smoothed/grey filled) when it keeps the frame, else view + image only.
   // Every frame within gradient.max_view_angle_deg of view i has been tapped
   // before sink(i) is called, so a consumer can keep its own window of the
-  // neighbours' frames (the embedded pipeline's densification does).
-  using FrameTap = std::function<void(int, const ViewImage&)>;
+  // neighbours' frames (the embedded pipeline's densification does). The
+  // cv::Mat is CompactFrame of the frame, the copy the stage itself keeps
+  // while it needs the frame: a consumer that keeps it shares those pixels.
+  using FrameTap = std::function<void(int, const ViewImage&, const cv::Mat&)>;
   void SetFrameTap(FrameTap tap) { frame_tap_ = std::move(tap); }
 
  private:

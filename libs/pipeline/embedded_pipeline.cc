@@ -96,11 +96,12 @@ struct WindowFrame {
   bool depth_smoothed = false;  // the depth stage had filled `smoothed` (presmooth_sigma of §3.1)
 };
 
-WindowFrame MakeWindowFrame(const ViewImage& v, bool compact) {
+// `compacted`: CompactFrame of the frame (the depth stage's copy, shared).
+WindowFrame MakeWindowFrame(const ViewImage& v, const cv::Mat& compacted, bool compact) {
   WindowFrame w;
   w.tapped.view = v.view;
   w.tapped.on_grid = v.on_grid;
-  const cv::Mat c = compact ? CompactFrame(v.image) : v.image;
+  const cv::Mat& c = compact ? compacted : v.image;
   if (c.depth() == CV_8U) {
     w.pixels = c;
     w.depth_smoothed = !v.smoothed.empty();
@@ -229,11 +230,11 @@ PipelineResult EmbeddedPipeline::Run(FrameSource& frames) {
   std::vector<ColorView> carve_views;
 
   StreamingDepth depth(views_, volume_, options_.depth);
-  depth.SetFrameTap([&](int f, const ViewImage& v) {
+  depth.SetFrameTap([&](int f, const ViewImage& v, const cv::Mat& compacted) {
     const bool compact = options_.compact_frames;
-    if (refcount[f] > 0) window[f] = MakeWindowFrame(v, compact);
+    if (refcount[f] > 0) window[f] = MakeWindowFrame(v, compacted, compact);
     st.max_frames_held_pipeline = std::max(st.max_frames_held_pipeline, static_cast<int>(window.size()));
-    if (color_ids.count(f) || carve_ids.count(f)) kept_frames[f] = compact ? CompactFrame(v.image) : v.image;
+    if (color_ids.count(f) || carve_ids.count(f)) kept_frames[f] = compact ? compacted : v.image;
   });
 
   const DepthPropagator propagator(options_.propagation);

@@ -68,7 +68,7 @@ int RunDepth(const DepthArgs& args) {
       ++refs[i];
       for (int j : near->Neighbors(i)) ++refs[j];
     }
-    stage.SetFrameTap([&](int f, const ViewImage& v) {
+    stage.SetFrameTap([&](int f, const ViewImage& v, const cv::Mat&) {
       if (refs[f] > 0) window[f] = v;
     });
   }

@@ -62,7 +62,7 @@ TEST(StreamingDepth, DenseSequenceHoldsOnlyTheHierarchyGrid) {
     o.gradient.level_min_step_deg = step;
     StreamingDepth stage(views, seq->scene().foreground_bbox(), o);
     std::vector<char> tapped(views.size(), 0);
-    stage.SetFrameTap([&](int f, const ViewImage&) { tapped[f] = 1; });
+    stage.SetFrameTap([&](int f, const ViewImage&, const cv::Mat&) { tapped[f] = 1; });
     auto frames = seq->OpenFrames();
     const auto stats = stage.Run(*frames, wanted, [&](int i, const cv::Mat&, const DepthMap& s, const DepthMap&) {
       emitted->push_back(i);
