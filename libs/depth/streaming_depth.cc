@@ -15,6 +15,7 @@ namespace lfrecon {
 void StreamingDepthOptions::Check() const {
   gradient.Check();
   filter.Check();
+  LFRECON_CHECK_OPTION(max_frame_gap >= 0);
 }
 
 StreamingDepth::StreamingDepth(std::vector<PinholeView> views, const BoundingBox& volume,
@@ -23,13 +24,20 @@ StreamingDepth::StreamingDepth(std::vector<PinholeView> views, const BoundingBox
   options_.Check();
 }
 
+std::vector<int> FilterVoters(const ViewGraph& wide, const std::vector<char>& on_grid, int i) {
+  std::vector<int> out;
+  for (int j : wide.Neighbors(i))
+    if (on_grid.at(static_cast<std::size_t>(j))) out.push_back(j);
+  return out;
+}
+
 StreamingDepthStats StreamingDepth::Run(FrameSource& frames, const std::vector<int>& wanted_in, const Sink& sink) {
   const int n = static_cast<int>(views_.size());
   StreamingDepthStats stats;
   std::vector<Eigen::Vector3d> dirs;
   for (const auto& v : views_) dirs.push_back(v.ViewingDirection());
-  const ViewGraph near(dirs, options_.gradient.max_view_angle_deg);
-  const ViewGraph wide(dirs, options_.filter.max_view_angle_deg);
+  const ViewGraph near(dirs, options_.gradient.max_view_angle_deg, options_.max_frame_gap);
+  const ViewGraph wide(dirs, options_.filter.max_view_angle_deg, options_.max_frame_gap);
 
   std::vector<int> wanted = wanted_in;
   if (wanted.empty())
@@ -37,18 +45,21 @@ StreamingDepthStats StreamingDepth::Run(FrameSource& frames, const std::vector<i
   for (int i : wanted)
     if (i < 0 || i >= n) throw OptionError("view index " + std::to_string(i) + " out of range [0, " + std::to_string(n) + ")");
 
+  // The frames each sparse map uses: the estimator's own selection among the
+  // views within 5°, on the sequence's hierarchy grid (level_min_step_deg), so
+  // a dense sequence holds only the grid frames and the pending references
+  // with their nearest neighbours, not every frame within 5°. The filter's
+  // voters are on the same grid.
+  const std::vector<char> on_grid = HierarchyGrid(views_, options_.gradient);
+  std::vector<std::vector<int>> voters(n);
+  if (options_.run_filter)
+    for (int i : wanted) voters[i] = FilterVoters(wide, on_grid, i);
   // Which sparse maps are needed, and when (after which frame) each can be computed.
   std::vector<char> need_sparse(n, 0);
   for (int i : wanted) {
     need_sparse[i] = 1;
-    if (options_.run_filter)
-      for (int j : wide.Neighbors(i)) need_sparse[j] = 1;
+    for (int j : voters[i]) need_sparse[j] = 1;
   }
-  // The frames each sparse map uses: the estimator's own selection among the
-  // views within 5°, on the sequence's hierarchy grid (level_min_step_deg), so
-  // a dense sequence holds only the grid frames and the pending references
-  // with their nearest neighbours, not every frame within 5°.
-  const std::vector<char> on_grid = HierarchyGrid(views_, options_.gradient);
   std::vector<std::vector<int>> uses(n);  // frames sparse map s uses besides s
   std::vector<int> sparse_ready(n, -1);  // last frame index that sparse map s needs
   std::vector<int> frame_last_use(n, -1);
@@ -75,12 +86,10 @@ StreamingDepthStats StreamingDepth::Run(FrameSource& frames, const std::vector<i
     // Every frame within 5° of i is read (and tapped) before i is emitted.
     int last = sparse_ready[i];
     for (int j : near.Neighbors(i)) last = std::max(last, j);
-    if (options_.run_filter)
-      for (int j : wide.Neighbors(i)) last = std::max(last, sparse_ready[j]);
+    for (int j : voters[i]) last = std::max(last, sparse_ready[j]);
     filter_ready[i] = last;
     sparse_last_use[i] = std::max(sparse_last_use[i], last);
-    if (options_.run_filter)
-      for (int j : wide.Neighbors(i)) sparse_last_use[j] = std::max(sparse_last_use[j], last);
+    for (int j : voters[i]) sparse_last_use[j] = std::max(sparse_last_use[j], last);
   }
   std::map<int, std::vector<int>> sparse_at, filter_at;  // frame index -> views that complete there
   for (int s = 0; s < n; ++s)
@@ -166,17 +175,17 @@ StreamingDepthStats StreamingDepth::Run(FrameSource& frames, const std::vector<i
       DepthMap filtered;
       if (options_.run_filter) {
         Timer timer;
-        std::set<int> voters(wide.Neighbors(i).begin(), wide.Neighbors(i).end());
-        voters.insert(i);
+        std::set<int> voting(voters[i].begin(), voters[i].end());
+        voting.insert(i);
         for (auto it = in_grid.begin(); it != in_grid.end();) {
-          if (!voters.count(*it)) {
+          if (!voting.count(*it)) {
             grid->Splat(sparse.at(*it).Unpack(), views_[*it], -1.0f);
             it = in_grid.erase(it);
           } else {
             ++it;
           }
         }
-        for (int v : voters)
+        for (int v : voting)
           if (!in_grid.count(v)) {
             grid->Splat(sparse.at(v).Unpack(), views_[v], 1.0f);
             in_grid.insert(v);

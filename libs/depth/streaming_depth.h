@@ -21,6 +21,13 @@ struct StreamingDepthOptions {
   GradientDepthOptions gradient;
   DepthFilterOptions filter;
   bool run_filter = true;
+  // Views more than this many frames apart in the stream are never
+  // neighbours (depth, filter, and the pipeline's densification), so no view
+  // waits for frames far ahead: without it the first views of a closed loop
+  // wait for its last frames (their neighbours across the seam), holding
+  // their frames and sparse maps for the whole stream. Shorter sequences
+  // (figurines 480 frames) are unaffected. 0: no limit.
+  int max_frame_gap = 1000;
   void Check() const;
 };
 
@@ -40,6 +47,16 @@ struct StreamingDepthStats {
   double seconds_sparse = 0;
   double seconds_filter = 0;
 };
+
+class ViewGraph;
+
+// The views whose sparse maps vote in view i's filtered map (§3.2): its
+// neighbours within the filter's angle (`wide`) that lie on the hierarchy
+// grid (`on_grid`, HierarchyGrid: views ≥ level_min_step_deg apart). Where
+// views are at least that far apart (figurines 0.75°) that is all of them; on
+// a dense sequence (0.12° at 3000 frames a loop) ~60 instead of ~250, whose
+// sparse maps would otherwise all wait in memory for the filter.
+std::vector<int> FilterVoters(const ViewGraph& wide, const std::vector<char>& on_grid, int i);
 
 class StreamingDepth {
  public:

@@ -3,6 +3,7 @@
 #include <Eigen/Geometry>
 #include <algorithm>
 #include <cmath>
+#include <cstdlib>
 #include <unordered_map>
 
 namespace lfrecon {
@@ -23,7 +24,7 @@ void SortByAngle(const std::vector<Eigen::Vector3d>& dirs, int i, std::vector<in
 
 }  // namespace
 
-ViewGraph::ViewGraph(const std::vector<Eigen::Vector3d>& directions, double max_angle_deg)
+ViewGraph::ViewGraph(const std::vector<Eigen::Vector3d>& directions, double max_angle_deg, int max_index_gap)
     : max_angle_deg_(max_angle_deg) {
   directions_.reserve(directions.size());
   for (const auto& d : directions) directions_.push_back(d.normalized());
@@ -56,6 +57,7 @@ ViewGraph::ViewGraph(const std::vector<Eigen::Vector3d>& directions, double max_
           if (it == grid.end()) continue;
           for (const auto& [cj, j] : it->second) {
             if (j == i || cj != c) continue;  // cj != c: hash collision
+            if (max_index_gap > 0 && std::abs(j - i) > max_index_gap) continue;
             if (AngleBetween(directions_[i], directions_[j]) <= max_angle_deg) neighbors_[i].push_back(j);
           }
         }

@@ -14,7 +14,10 @@ class ViewGraph {
  public:
   ViewGraph() = default;
   // `directions` are unit viewing directions (world), one per view.
-  ViewGraph(const std::vector<Eigen::Vector3d>& directions, double max_angle_deg);
+  // `max_index_gap` > 0: only views at most that many places apart in the
+  // sequence are neighbours (a stream then never waits for a view that comes
+  // much later, e.g. the end of a closed loop for its first views).
+  ViewGraph(const std::vector<Eigen::Vector3d>& directions, double max_angle_deg, int max_index_gap = 0);
 
   int num_views() const { return static_cast<int>(neighbors_.size()); }
   double max_angle_deg() const { return max_angle_deg_; }

@@ -14,6 +14,8 @@
 #include <sstream>
 #include <thread>
 
+#include "depth/gradient_depth_estimator.h"
+#include "depth/streaming_depth.h"
 #include "fusion/mesh_coloring.h"
 #include "io/ply.h"
 #include "refine/refine.h"
@@ -34,6 +36,7 @@ struct Aggregator::Job {
   JobGeometry geo;      // constant once loaded (the fusion thread reads it too)
   int n = 0;
   ViewGraph near, wide, photo;
+  std::vector<char> on_grid;  // HierarchyGrid: the filter's voters (FilterVoters)
   std::vector<char> frame_ok, sparse_ok, dense_ok;
   int frames_spooled = 0, sparse_done = 0, dense_done = 0;  // dense_done: maps received (stored)
   bool ingest_done = false;
@@ -245,9 +248,10 @@ std::unique_ptr<Aggregator::Job> Aggregator::LoadJob(const std::string& id) {
   const PipelineOptions& po = job->geo.options;
   std::vector<Eigen::Vector3d> dirs;
   for (const auto& v : job->geo.views) dirs.push_back(v.ViewingDirection());
-  job->near = ViewGraph(dirs, po.depth.gradient.max_view_angle_deg);
-  job->wide = ViewGraph(dirs, po.depth.filter.max_view_angle_deg);
-  job->photo = ViewGraph(dirs, po.propagation.photo.max_view_angle_deg);
+  job->near = ViewGraph(dirs, po.depth.gradient.max_view_angle_deg, po.depth.max_frame_gap);
+  job->wide = ViewGraph(dirs, po.depth.filter.max_view_angle_deg, po.depth.max_frame_gap);
+  job->photo = ViewGraph(dirs, po.propagation.photo.max_view_angle_deg, po.depth.max_frame_gap);
+  job->on_grid = HierarchyGrid(job->geo.views, po.depth.gradient);
   job->frame_ok.assign(n, 0);
   job->sparse_ok.assign(n, 0);
   job->dense_ok.assign(n, 0);
@@ -464,15 +468,16 @@ pb::Envelope Aggregator::HandleTaskRequest(const pb::Envelope& req) {
         for (int j : job.near.Neighbors(v)) task->add_frames(j);
       } else {
         if (job.dense_ok[v] || !job.sparse_ok[v]) continue;
+        const std::vector<int> voters = FilterVoters(job.wide, job.on_grid, v);
         bool ready = true;
-        for (int j : job.wide.Neighbors(v)) ready = ready && job.sparse_ok[j];
+        for (int j : voters) ready = ready && job.sparse_ok[j];
         if (!ready) continue;
         task->add_frames(v);
         if (job.geo.options.densify) {
           if (!job.FramesOk(v, job.photo.Neighbors(v))) continue;
           for (int j : job.photo.Neighbors(v)) task->add_frames(j);
         }
-        for (int j : job.wide.Neighbors(v)) task->add_voters(j);
+        for (int j : voters) task->add_voters(j);
       }
       task->set_stage(static_cast<pb::Stage>(stage));
       task->set_view(v);

@@ -42,6 +42,28 @@ TEST(StreamingDepth, EmitsEveryWantedViewOnceWithBoundedWindow) {
   EXPECT_EQ(stats.filtered_maps, 4);
 }
 
+TEST(StreamingDepth, MaxFrameGapStopsTheFirstViewsWaitingForTheEndOfTheLoop) {
+  const auto seq = SmallSequence(360);  // one closed loop, 1° apart
+  std::vector<PinholeView> views;
+  for (int i = 0; i < seq->NumFrames(); ++i) views.push_back(seq->View(i));
+  for (int gap : {0, 60}) {
+    StreamingDepthOptions o;
+    o.max_frame_gap = gap;
+    StreamingDepth stage(views, seq->scene().foreground_bbox(), o);
+    auto frames = seq->OpenFrames();
+    int emitted = 0;
+    const auto stats = stage.Run(*frames, {0, 1}, [&](int, const cv::Mat&, const DepthMap& s, const DepthMap&) {
+      ++emitted;
+      EXPECT_GT(s.CountValid(), 0);
+    });
+    EXPECT_EQ(emitted, 2);
+    // Without the gap view 0's neighbours across the seam (frames 345-359) are
+    // waited for; with it view 0 is done within ~20 frames (15° ahead plus 5°).
+    if (gap == 0) EXPECT_EQ(stats.frames_read, 360);
+    else EXPECT_LE(stats.frames_read, 25);
+  }
+}
+
 TEST(StreamingDepth, DenseSequenceHoldsOnlyTheHierarchyGrid) {
   // 3000 frames per loop (0.12° apart): ~100 frames within 5° of a view. On
   // the hierarchy grid (level_min_step_deg) the sparse maps use, and the
@@ -83,6 +105,31 @@ TEST(StreamingDepth, DenseSequenceHoldsOnlyTheHierarchyGrid) {
   EXPECT_GE(all.max_frames_held, 70);
   EXPECT_LE(thin.max_frames_held, 40);
   EXPECT_EQ(thin.frames_read, all.frames_read);  // the tap contract: every frame within 5° is read
+}
+
+TEST(StreamingDepth, FilterVotersAreTheGridViewsWithin15Degrees) {
+  for (int frames : {480, 3000}) {  // 0.75° apart: every view votes; 0.12°: the grid (≥ 0.5°) only
+    const auto seq = SmallSequence(frames);
+    std::vector<PinholeView> views;
+    std::vector<Eigen::Vector3d> dirs;
+    for (int i = 0; i < seq->NumFrames(); ++i) {
+      views.push_back(seq->View(i));
+      dirs.push_back(views.back().ViewingDirection());
+    }
+    const ViewGraph wide(dirs, DepthFilterOptions().max_view_angle_deg);
+    const std::vector<char> grid = HierarchyGrid(views, GradientDepthOptions());
+    const std::vector<int> voters = FilterVoters(wide, grid, frames / 2);
+    std::printf("%d frames: %zu views within 15°, %zu voters\n", frames, wide.Neighbors(frames / 2).size(),
+                voters.size());
+    if (frames == 480) {
+      EXPECT_EQ(voters, wide.Neighbors(frames / 2));
+    } else {
+      EXPECT_GE(wide.Neighbors(frames / 2).size(), 200u);
+      EXPECT_LE(voters.size(), 70u);
+      EXPECT_GE(voters.size(), 40u);
+      for (int j : voters) EXPECT_TRUE(grid[j]);
+    }
+  }
 }
 
 TEST(StreamingDepth, ShortStreamAndBadIndexAreErrors) {

@@ -2,6 +2,7 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <random>
 
 #include "geometry/rigid3.h"
@@ -53,6 +54,22 @@ TEST(ViewGraph, RandomDirectionsAndDuplicates) {
   const auto brute = ViewGraph::BruteForce(dirs, 10.0);
   for (int i = 0; i < graph.num_views(); ++i) EXPECT_EQ(graph.Neighbors(i), brute[i]);
   EXPECT_EQ(graph.Neighbors(800).front(), 0);
+}
+
+TEST(ViewGraph, MaxIndexGapCutsTheSeamOfAClosedLoop) {
+  // One flat loop of 100 views, 3.6° apart: within 10°, views 0 and 99 are neighbours.
+  std::vector<Eigen::Vector3d> dirs;
+  for (int i = 0; i < 100; ++i) {
+    const double a = 2 * M_PI * i / 100;
+    dirs.emplace_back(std::cos(a), std::sin(a), 0.0);
+  }
+  const ViewGraph all(dirs, 10.0), cut(dirs, 10.0, 50);
+  auto has = [](const std::vector<int>& v, int j) { return std::find(v.begin(), v.end(), j) != v.end(); };
+  EXPECT_TRUE(has(all.Neighbors(0), 99));
+  EXPECT_TRUE(has(all.Neighbors(0), 98));
+  EXPECT_FALSE(has(cut.Neighbors(0), 99));
+  EXPECT_EQ(cut.Neighbors(0), (std::vector<int>{1, 2}));
+  EXPECT_EQ(cut.Neighbors(50), all.Neighbors(50));  // away from the seam nothing changes
 }
 
 TEST(ViewGraph, SortedByAngle) {
