@@ -164,7 +164,15 @@ DepthMap DensifyNeighbourByNeighbour(const DepthPropagator& propagator, const Vi
   for (int j : photo.SelectNeighbors(reference.view, views))
     acc.Add(MaterializeWindowFrame(*usable[static_cast<std::size_t>(j)], go, options.photo, false));
   const EdgeConsistency edges = acc.Finish();
-  return propagator.Filter(reference.image, propagator.Splat(labelled, edges));
+  DepthMap dense = propagator.Filter(reference.image, propagator.Splat(labelled, edges));
+  if (options.consistency.views > 0) {  // second pass, again one neighbour at a time
+    DenseConsistencyAccumulator check(options.consistency);
+    check.Begin(reference, dense, labelled.depth);
+    for (int j : check.SelectNeighbors(reference.view, views))
+      check.Add(MaterializeWindowFrame(*usable[static_cast<std::size_t>(j)], go, options.photo, false));
+    ApplyDenseConsistency(check.Finish(), options.consistency.rho_min, &dense);
+  }
+  return dense;
 }
 
 }  // namespace
@@ -208,7 +216,7 @@ PipelineResult EmbeddedPipeline::Run(FrameSource& frames) {
   if (options_.densify) {
     std::vector<Eigen::Vector3d> dirs;
     for (const auto& v : views_) dirs.push_back(v.ViewingDirection());
-    photo_graph = ViewGraph(dirs, options_.propagation.photo.max_view_angle_deg);
+    photo_graph = ViewGraph(dirs, options_.propagation.photo.max_view_angle_deg, options_.depth.max_frame_gap);
     for (int i : wanted) {
       ++refcount[i];
       for (int j : photo_graph.Neighbors(i)) ++refcount[j];

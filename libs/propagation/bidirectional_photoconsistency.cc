@@ -8,6 +8,7 @@
 #include <cmath>
 #include <opencv2/imgproc.hpp>
 
+#include "propagation/image_sampling.h"
 #include "util/error.h"
 
 namespace lfrecon {
@@ -75,21 +76,6 @@ cv::Mat GradientDirection(const cv::Mat& image_bgr) {
 }
 
 namespace {
-
-// Bilinear sample of a CV_32FC3 image at COLMAP coordinates (pixel centres at
-// +0.5), in single precision (the inner loop); false outside.
-inline bool Sample3(const cv::Mat& image, float x, float y, Eigen::Vector3f* out) {
-  const float fx = x - 0.5f, fy = y - 0.5f;
-  if (!(fx >= 0.0f && fy >= 0.0f)) return false;  // also rejects NaN
-  const int x0 = static_cast<int>(fx), y0 = static_cast<int>(fy);
-  if (x0 + 1 >= image.cols || y0 + 1 >= image.rows) return false;
-  const float ax = fx - x0, ay = fy - y0;
-  const float* r0 = image.ptr<float>(y0) + 3 * x0;
-  const float* r1 = image.ptr<float>(y0 + 1) + 3 * x0;
-  const float w00 = (1 - ax) * (1 - ay), w01 = ax * (1 - ay), w10 = (1 - ax) * ay, w11 = ax * ay;
-  for (int c = 0; c < 3; ++c) (*out)[c] = w00 * r0[c] + w01 * r0[3 + c] + w10 * r1[c] + w11 * r1[3 + c];
-  return true;
-}
 
 // The homogeneous pixel of reference pixel x̃ in a neighbour, on the plane at
 // depth d: y = d·A·x̃ + a (A = K_j R_ji K_i⁻¹, a = K_j t_ji).
@@ -217,7 +203,7 @@ void PhotoconsistencyAccumulator::Begin(const ViewImage& reference, const DepthM
         const float sgn = side == 0 ? 1.0f : -1.0f;
         for (int k = 1; k <= S && px.side_ok[side]; ++k) {
           const Eigen::Vector2f x = p + (sgn * k) * step;
-          px.side_ok[side] = Sample3(ref_img, x.x(), x.y(), &f[side * S + k - 1]);
+          px.side_ok[side] = SampleBgr(ref_img, x.x(), x.y(), &f[side * S + k - 1]);
         }
       }
       if (!px.side_ok[0] && !px.side_ok[1]) continue;
@@ -264,7 +250,7 @@ void PhotoconsistencyAccumulator::Add(const ViewImage& neighbor) {
         for (int k = 1; k <= S; ++k) {
           const Eigen::Vector3f y = y0 + (sgn * k) * dy;
           Eigen::Vector3f g;
-          if (!(y.z() > 0) || !Sample3(image, y.x() / y.z(), y.y() / y.z(), &g)) {
+          if (!(y.z() > 0) || !SampleBgr(image, y.x() / y.z(), y.y() / y.z(), &g)) {
             ok = false;
             break;
           }

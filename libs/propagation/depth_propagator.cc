@@ -16,6 +16,7 @@ namespace lfrecon {
 
 void PropagationOptions::Check() const {
   photo.Check();
+  consistency.Check();
   LFRECON_CHECK_OPTION(dt_sigma_spatial > 0 && dt_sigma_spatial <= 1);
   LFRECON_CHECK_OPTION(dt_sigma_color > 0);
   LFRECON_CHECK_OPTION(dt_mode == DomainTransformMode::kNormalizedConvolution ||
@@ -37,6 +38,7 @@ PropagationOptions PaperPropagationOptions() {
   o.silhouette_pixels_splat_only = false;
   o.keep_edge_depths = false;
   o.filter_inverse_depth = false;
+  o.consistency.views = 0;
   return o;
 }
 
@@ -332,6 +334,9 @@ DenseDepthResult DepthPropagator::Run(const ViewImage& reference, const std::vec
   timer.Restart();
   result.dense = Filter(reference.image, splats);
   result.seconds_filter = timer.Seconds();
+  timer.Restart();
+  CheckDenseConsistency(reference, neighbors, options_.consistency, &result.dense, labelled.depth);
+  result.seconds_consistency = timer.Seconds();
   return result;
 }
 

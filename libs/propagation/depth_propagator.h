@@ -48,6 +48,7 @@
 #include "depth/gradient_depth_estimator.h"
 #include "geometry/triangle_mesh.h"
 #include "propagation/bidirectional_photoconsistency.h"
+#include "propagation/dense_consistency.h"
 
 namespace lfrecon {
 
@@ -103,6 +104,9 @@ struct PropagationOptions {
   // cannot spread from the edge pixel to the occluded side (false: they
   // keep max(C+, C−), as §4.2).
   bool silhouette_pixels_splat_only = true;
+  // After the filter, each foreground depth is checked against the frames of
+  // the widest-baseline neighbours (dense_consistency.h; ours: views = 0 turns it off).
+  DenseConsistencyOptions consistency;
   // Pixels that had a depth keep it where their own side wins (ours; false:
   // every pixel takes the filtered depth D' of eq. 10, as the paper).
   bool keep_edge_depths = true;
@@ -136,6 +140,7 @@ struct DenseDepthResult {
   double seconds_photoconsistency = 0;
   double seconds_splat = 0;
   double seconds_filter = 0;
+  double seconds_consistency = 0;
 };
 
 class DepthPropagator {

@@ -39,6 +39,7 @@
 #include "geometry/view_graph.h"
 #include "io/dataset.h"
 #include "io/depth_map_io.h"
+#include "propagation/dense_consistency.h"
 #include "propagation/depth_propagator.h"
 #include "propagation/edge_preview.h"
 #include "util/memory.h"
@@ -70,6 +71,8 @@ int main(int argc, char** argv) {
   dopt.dataset_dir = argv[1];
   int gt_views = 4, skip = 1, stride = 1, threads = 2, repeat = 1;
   bool oracle = false;
+  // ρ of DenseConsistencyAccumulator by truth class (4 views; meaningful with --consistency-views 0).
+  bool consistency_stats = false;
   int upscale = 1;
   std::string preview_dir, cache_dir;
   StreamingDepthOptions sopt;
@@ -105,6 +108,11 @@ int main(int argc, char** argv) {
     else if (!std::strcmp(argv[a], "--no-keep-edge-depths")) popt.keep_edge_depths = false;
     else if (!std::strcmp(argv[a], "--no-inverse-depth")) popt.filter_inverse_depth = false;
     else if (!std::strcmp(argv[a], "--two-sided")) popt.one_sided_silhouettes = false;
+    else if (is("--consistency-views")) popt.consistency.views = std::atoi(argv[++a]);
+    else if (is("--consistency-min")) popt.consistency.rho_min = std::atof(argv[++a]);
+    else if (is("--consistency-patch")) popt.consistency.patch_radius_px = std::atoi(argv[++a]);
+    else if (!std::strcmp(argv[a], "--consistency-stats")) consistency_stats = true;
+    else if (is("--consistency-sigma")) popt.consistency.sigma = std::atof(argv[++a]);
     else if (!std::strcmp(argv[a], "--no-silhouette-splat-only")) popt.silhouette_pixels_splat_only = false;
     else if (is("--ridge")) popt.affine_ridge_px = std::atof(argv[++a]);
     else if (!std::strcmp(argv[a], "--oracle-depth")) oracle = true;
@@ -142,6 +150,10 @@ int main(int argc, char** argv) {
   dense_opt.dense = true;
   double t_photo = 0, t_splat = 0, t_filter = 0, t_total = 0, t_cpu = 0;
   long long edge_pixels = 0, silhouette_pixels = 0, neighbours = 0;
+  long long gt_fg_pixels = 0, gt_bg_pixels = 0, false_fg = 0, lost_fg = 0;
+  double false_fg_conf = 0, lost_fg_conf = 0;
+  double rho_hist[3][10] = {}, rho_conf[3][10] = {};
+  long long false_fg_table = 0, false_fg_on_truth = 0, false_fg_above = 0;
   int done = 0;
   if (!preview_dir.empty()) fs::create_directories(preview_dir);
   Timer wall;
@@ -230,6 +242,62 @@ int main(int argc, char** argv) {
       dense_loose[k].Add(EvaluateDepth(best.dense, gt, image, dviews[i], ds.bbox(), loose));
     }
     dense_sparse_criterion.Add(ms);
+    cv::Mat rho;
+    if (consistency_stats) {
+      DenseConsistencyOptions co = popt.consistency;
+      co.views = 4;
+      DenseConsistencyAccumulator acc(co);
+      std::vector<const PinholeView*> nvs;
+      for (const ViewImage& v : nb_views) nvs.push_back(&v.view);
+      acc.Begin(ref, best.dense);
+      for (int j : acc.SelectNeighbors(ref.view, nvs)) acc.Add(nb_views[static_cast<std::size_t>(j)]);
+      rho = acc.Finish();
+      // ρ histograms: true foreground within 1 % / beyond, true background labelled foreground.
+      for (int r = 0; r < gt.rows; ++r)
+        for (int c = 0; c < gt.cols; ++c) {
+          const float t = gt.at<float>(r, c), q = rho.at<float>(r, c);
+          if (!(t > 0) || q < 0) continue;
+          const bool true_fg = ds.bbox().Contains(dviews[i].Unproject(Eigen::Vector2d(c + 0.5, r + 0.5), t));
+          const float e = best.dense.depth.at<float>(r, c);
+          const int cls = !true_fg ? 2 : std::abs(e - t) <= 0.01 * t ? 0 : 1;
+          rho_hist[cls][std::min(9, static_cast<int>(q * 10))] += 1;
+          rho_conf[cls][std::min(9, static_cast<int>(q * 10))] += best.dense.confidence.at<float>(r, c);
+        }
+    }
+    {
+      // Labels against the truth: ground-truth background pixels (true point
+      // outside V) labelled foreground are what fusion turns into surface
+      // that is not there (false foreground); ground-truth foreground pixels
+      // labelled background are what it carves (lost foreground).
+      for (int r = 0; r < gt.rows; ++r)
+        for (int c = 0; c < gt.cols; ++c) {
+          const float t = gt.at<float>(r, c);
+          if (!(t > 0)) continue;
+          const bool true_fg = ds.bbox().Contains(dviews[i].Unproject(Eigen::Vector2d(c + 0.5, r + 0.5), t));
+          const float e = best.dense.depth.at<float>(r, c);
+          const std::uint8_t l = best.dense.label.at<std::uint8_t>(r, c);
+          const bool fg = e > 0 && l == static_cast<std::uint8_t>(DepthLabel::kForeground);
+          const bool bgl = e > 0 && l == static_cast<std::uint8_t>(DepthLabel::kBackground);
+          (true_fg ? gt_fg_pixels : gt_bg_pixels)++;
+          if (!true_fg && fg) {
+            ++false_fg;
+            false_fg_conf += best.dense.confidence.at<float>(r, c);
+            // Where: the table under V (true z within 3 mm of V's floor), and
+            // whether the estimate sits on the true point (within 1 %).
+            const Eigen::Vector3d x = dviews[i].Unproject(Eigen::Vector2d(c + 0.5, r + 0.5), t);
+            const bool table = std::abs(x.z() - ds.bbox().min.z()) < 0.003 && x.x() >= ds.bbox().min.x() &&
+                               x.x() <= ds.bbox().max.x() && x.y() >= ds.bbox().min.y() && x.y() <= ds.bbox().max.y();
+            false_fg_table += table;
+            false_fg_on_truth += std::abs(e - t) <= 0.01 * t;
+            const Eigen::Vector3d xe = dviews[i].Unproject(Eigen::Vector2d(c + 0.5, r + 0.5), e);
+            false_fg_above += xe.z() - ds.bbox().min.z() > 0.005;
+          }
+          if (true_fg && bgl) {
+            ++lost_fg;
+            lost_fg_conf += best.dense.confidence.at<float>(r, c);
+          }
+        }
+    }
     if (getenv("LFRECON_BENCH_DIAG")) {
       // Dense accuracy over ground-truth foreground pixels by distance to the
       // nearest pixel with a filtered depth, and the label of wrong ones.
@@ -279,6 +347,16 @@ int main(int argc, char** argv) {
         for (int r = 0; r < gt.rows; ++r)
           for (int c = 0; c < gt.cols; ++c) {
             const float t = gt.at<float>(r, c);
+            if (t > 0 && !ds.bbox().Contains(dviews[i].Unproject(Eigen::Vector2d(c + 0.5, r + 0.5), t))) {
+              // True background labelled foreground (false foreground): magenta.
+              for (int k = 0; k < 2; ++k) {
+                const DepthMap& m = k == 0 ? best.dense : filtered;
+                if (m.depth.at<float>(r, c) > 0 &&
+                    m.label.at<std::uint8_t>(r, c) == static_cast<std::uint8_t>(DepthLabel::kForeground))
+                  err.at<cv::Vec3b>(r, c + k * gt.cols) = cv::Vec3b(255, 0, 255);
+              }
+              continue;
+            }
             if (!(t > 0) || !ds.bbox().Contains(dviews[i].Unproject(Eigen::Vector2d(c + 0.5, r + 0.5), t)) ||
                 dviews[i].Unproject(Eigen::Vector2d(c + 0.5, r + 0.5), t).z() < 0.001)
               continue;
@@ -345,6 +423,26 @@ int main(int argc, char** argv) {
   PrintCurve("filtered (edge pixels)", filtered_total);
   PrintCurve("dense (edge pixels)", dense_sparse_criterion);
   PrintCurve("dense (all foreground pixels)", dense_total);
+  if (consistency_stats) {
+    const char* names[3] = {"true fg, depth within 1%", "true fg, depth off", "false fg (true background)"};
+    for (int k = 0; k < 3; ++k) {
+      double n = 0, w = 0;
+      for (int b = 0; b < 10; ++b) n += rho_hist[k][b], w += rho_conf[k][b];
+      std::printf("rho %-28s:", names[k]);
+      for (int b = 0; b < 10; ++b) std::printf(" %.3f", rho_hist[k][b] / std::max(1.0, n));
+      std::printf("  | by confidence:");
+      for (int b = 0; b < 10; ++b) std::printf(" %.3f", rho_conf[k][b] / std::max(1e-9, w));
+      std::printf("  (%.0f px)\n", n);
+    }
+  }
+  std::printf("labels: false foreground %.4f of true background pixels (summed confidence %.1f per view), "
+              "lost foreground %.4f of true foreground pixels (summed confidence %.1f per view)\n",
+              double(false_fg) / std::max(1LL, gt_bg_pixels), false_fg_conf / std::max(1, done),
+              double(lost_fg) / std::max(1LL, gt_fg_pixels), lost_fg_conf / std::max(1, done));
+  std::printf("  false foreground: %.3f on the table under V, %.3f within 1 %% of the true depth, %.3f put "
+              "more than 5 mm above V's floor\n",
+              double(false_fg_table) / std::max(1LL, false_fg), double(false_fg_on_truth) / std::max(1LL, false_fg),
+              double(false_fg_above) / std::max(1LL, false_fg));
   std::printf("dense (all foreground pixels) within 1%%: accuracy %.4f; within 2%%: accuracy %.4f\n",
               dense_loose[0].Accuracy(), dense_loose[1].Accuracy());
   return 0;

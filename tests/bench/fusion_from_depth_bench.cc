@@ -30,8 +30,11 @@
 #include "io/dataset.h"
 #include "io/depth_map_io.h"
 #include "io/ply.h"
+#include "propagation/dense_consistency.h"
+#include "propagation/depth_propagator.h"
 #include "util/progress.h"
 #include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
 #include "refine/mesh_cleanup.h"
 #include "refine/refine.h"
 
@@ -416,6 +419,9 @@ int main(int argc, char** argv) {
   std::vector<std::string> variants;
   std::vector<double> min_comp_cm2;
   std::vector<Eigen::Vector3d> probes;
+  int cons_views = 0;
+  double cons_min = 0.4;
+  int cons_radius = DenseConsistencyOptions{}.patch_radius_px;
   for (int a = 3; a + 1 < argc; a += 2) {
     const std::string k = argv[a], v = argv[a + 1];
     if (k == "--sigma-s") {
@@ -471,6 +477,8 @@ int main(int argc, char** argv) {
         Eigen::Vector3d q;
         if (std::sscanf(item.c_str(), "%lf,%lf,%lf", &q.x(), &q.y(), &q.z()) == 3) probes.push_back(q);
       }
+    } else if (k == "--dense-consistency") {  // views,rho_min: CheckDenseConsistency on the loaded maps
+      std::sscanf(v.c_str(), "%d,%lf,%d", &cons_views, &cons_min, &cons_radius);
     } else if (k == "--analyze") {
       analyze = std::atoi(v.c_str()) != 0;
     } else if (k == "--keep-mesh") {
@@ -526,6 +534,43 @@ int main(int argc, char** argv) {
   }
   std::printf("%zu depth maps from %s\n", maps.size(), depth_dir.c_str());
   if (maps.empty()) return 1;
+  if (cons_views > 0) {
+    // The dense maps' foreground depths checked against the frames (as
+    // DepthPropagator does after its filter, for maps written without it).
+    Timer ct;
+    DenseConsistencyOptions co;
+    co.views = cons_views;
+    co.rho_min = cons_min;
+    co.patch_radius_px = cons_radius;
+    auto frames = ds.OpenFrames();
+    std::vector<PinholeView> all;
+    for (int i = 0; i < ds.NumViews(); ++i) all.push_back(ds.View(i));
+    std::vector<const PinholeView*> all_ptr;
+    for (const PinholeView& v : all) all_ptr.push_back(&v);
+    const auto load = [&](int id) {
+      ViewImage v;
+      v.view = all[static_cast<std::size_t>(id)];
+      v.image = frames->Read(id).image;
+      cv::GaussianBlur(v.image, v.smoothed, cv::Size(0, 0), 0.65);
+      return v;
+    };
+    long long before = 0, after = 0;
+    for (std::size_t k = 0; k < maps.size(); ++k) {
+      const ViewImage ref = load(ids[k]);
+      DepthMap labelled = DepthPropagator::LabelFromVolume(ref.view, maps[k], ds.bbox());
+      std::vector<ViewImage> nbs;
+      for (int j : DenseConsistencyAccumulator(co).SelectNeighbors(ref.view, all_ptr)) nbs.push_back(load(j));
+      std::vector<const ViewImage*> nb_ptr;
+      for (const ViewImage& v : nbs) nb_ptr.push_back(&v);
+      before += labelled.CountValid();
+      CheckDenseConsistency(ref, nb_ptr, co, &labelled);
+      after += labelled.CountValid();
+      maps[k].depth = labelled.depth;
+      maps[k].confidence = labelled.confidence;
+    }
+    std::printf("dense consistency (%d views, rho_min %.2f, patch radius %d px): %.3f of the depths removed, %.1f s\n",
+                cons_views, cons_min, cons_radius, 1.0 - double(after) / std::max(1LL, before), ct.Seconds());
+  }
   if (bg_floor > 0) {  // depths beyond V (background) get at least this confidence
     std::size_t raised = 0;
     for (std::size_t k = 0; k < maps.size(); ++k) {

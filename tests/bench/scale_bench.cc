@@ -21,6 +21,8 @@
 //   compares H voxel by voxel and the F-scores at the end (memory: the whole store).
 // --budget-mib: FusionOptions::store_budget_bytes (0: unlimited); --loops: turns
 //   of the camera over the N frames (0: the scene's default, one turn).
+// --consistency V,RHO,R (pipeline mode): PropagationOptions::consistency views,
+//   rho_min, patch_radius_px (V = 0: no check); --max-frame-gap N: StreamingDepthOptions::max_frame_gap.
 // --8bit (pipeline mode): frames quantized to 8 bits as decoded PNG/video frames
 //   are (the renderer's are float); --no-compact: PipelineOptions::compact_frames
 //   off (windows hold CV_32FC3 frames).
@@ -177,6 +179,8 @@ class EightBitSource : public FrameSource {
 
 int main(int argc, char** argv) {
   std::string mode = "exact", scene = "tabletop", mesh_out;
+  DenseConsistencyOptions consistency;
+  int max_frame_gap = StreamingDepthOptions{}.max_frame_gap;
   int frames = 3000, width = 1280, height = 720, divisions = 256, report_every = 250, threads = 0, max_block = 16;
   double loops = 0, budget_mib = 1024;
   bool eval = false, refine = true, compare = false, eight_bit = false, compact = true;
@@ -206,6 +210,10 @@ int main(int argc, char** argv) {
     else if (k == "--eval") eval = true;
     else if (k == "--no-refine") refine = false;
     else if (k == "--8bit") eight_bit = true;
+    else if (k == "--consistency") {  // views,rho_min,patch_radius_px of the dense check (views 0: off)
+      std::sscanf(value().c_str(), "%d,%lf,%d", &consistency.views, &consistency.rho_min,
+                  &consistency.patch_radius_px);
+    } else if (k == "--max-frame-gap") max_frame_gap = std::atoi(value().c_str());
     else if (k == "--no-compact") compact = false;
     else if (k == "--compare-exact") compare = true;
     else if (k == "--budgets-mib") {
@@ -346,6 +354,8 @@ int main(int argc, char** argv) {
   po.voxel_divisions = divisions;
   po.refine = refine;
   po.compact_frames = compact;
+  po.propagation.consistency = consistency;
+  po.depth.max_frame_gap = max_frame_gap;
   po.write_vdb = false;
   po.write_turntable = false;
   po.fusion.store_budget_bytes = budget;

@@ -1,0 +1,179 @@
+#include "propagation/dense_consistency.h"
+
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+
+#include <algorithm>
+#include <cmath>
+
+#include "propagation/image_sampling.h"
+#include "util/error.h"
+
+namespace lfrecon {
+
+void DenseConsistencyOptions::Check() const {
+  LFRECON_CHECK_OPTION(sigma > 0);
+  LFRECON_CHECK_OPTION(views >= 0);
+  LFRECON_CHECK_OPTION(patch_radius_px >= 0 && patch_radius_px <= 3);
+  LFRECON_CHECK_OPTION(rho_min >= 0 && rho_min <= 1);
+  LFRECON_CHECK_OPTION(max_view_angle_deg > 0 && max_view_angle_deg < 90);
+}
+
+DenseConsistencyAccumulator::DenseConsistencyAccumulator(const DenseConsistencyOptions& options)
+    : options_(options) {
+  options_.Check();
+}
+
+namespace {
+
+const cv::Mat& Colours(const ViewImage& v) {
+  return !v.smoothed.empty() && v.smoothed.size() == v.image.size() && v.smoothed.type() == CV_32FC3 ? v.smoothed
+                                                                                                    : v.image;
+}
+
+// Which side of the reference a neighbour's centre lies on (its camera x axis).
+int SideOf(const PinholeView& reference, const PinholeView& nb) {
+  return (reference.R * nb.Center() + reference.t).x() >= 0 ? 0 : 1;
+}
+
+}  // namespace
+
+std::vector<int> DenseConsistencyAccumulator::SelectNeighbors(
+    const PinholeView& reference, const std::vector<const PinholeView*>& neighbors) const {
+  // Per side, usable neighbours by decreasing angle (widest baseline first).
+  std::vector<std::pair<double, int>> side[2];
+  for (std::size_t j = 0; j < neighbors.size(); ++j) {
+    if (!neighbors[j]) continue;
+    if ((neighbors[j]->Center() - reference.Center()).norm() < 1e-9) continue;
+    const double cosang = std::clamp(reference.ViewingDirection().dot(neighbors[j]->ViewingDirection()), -1.0, 1.0);
+    const double angle = std::acos(cosang) * 180.0 / M_PI;
+    if (angle > options_.max_view_angle_deg) continue;
+    side[SideOf(reference, *neighbors[j])].emplace_back(angle, static_cast<int>(j));
+  }
+  for (auto& s : side)
+    std::stable_sort(s.begin(), s.end(), [](const auto& x, const auto& y) { return x.first > y.first; });
+  // Alternate sides, so an even split where both have enough.
+  std::vector<int> out;
+  std::size_t k[2] = {0, 0};
+  while (static_cast<int>(out.size()) < options_.views && (k[0] < side[0].size() || k[1] < side[1].size())) {
+    for (int s = 0; s < 2 && static_cast<int>(out.size()) < options_.views; ++s)
+      if (k[s] < side[s].size()) out.push_back(side[s][k[s]++].second);
+  }
+  return out;
+}
+
+void DenseConsistencyAccumulator::Begin(const ViewImage& reference, const DepthMap& dense, const cv::Mat& own) {
+  pixels_.clear();
+  reference_view_ = reference.view;
+  size_ = dense.depth.size();
+  patches_.clear();
+  if (dense.depth.empty() || dense.depth.type() != CV_32F || reference.image.size() != dense.depth.size() ||
+      reference.image.type() != CV_32FC3 || dense.label.size() != dense.depth.size())
+    return;
+  const cv::Mat& img = Colours(reference);
+  const bool skip_own = own.size() == dense.depth.size() && own.type() == CV_32F;
+  const int rad = options_.patch_radius_px, side = 2 * rad + 1;
+  constexpr std::uint8_t kFg = static_cast<std::uint8_t>(DepthLabel::kForeground);
+  for (int r = rad; r + rad < dense.depth.rows; ++r) {
+    const float* d = dense.depth.ptr<float>(r);
+    const std::uint8_t* l = dense.label.ptr<std::uint8_t>(r);
+    const float* o = skip_own ? own.ptr<float>(r) : nullptr;
+    for (int c = rad; c + rad < dense.depth.cols; ++c) {
+      if (!(d[c] > 0) || l[c] != kFg || (o && o[c] > 0)) continue;
+      Pixel p;
+      p.row = r;
+      p.col = c;
+      p.d = d[c];
+      pixels_.push_back(p);
+      // The patch's colours (whole pixels of the reference, row by row).
+      for (int dy = -rad; dy <= rad; ++dy) {
+        const float* bgr = img.ptr<float>(r + dy) + 3 * (c - rad);
+        patches_.insert(patches_.end(), bgr, bgr + 3 * side);
+      }
+    }
+  }
+}
+
+void DenseConsistencyAccumulator::Add(const ViewImage& neighbor) {
+  if (pixels_.empty() || neighbor.image.empty() || neighbor.image.type() != CV_32FC3) return;
+  const cv::Mat& img = Colours(neighbor);
+  const int side = SideOf(reference_view_, neighbor.view);
+  // A reference pixel x̃ on the plane fronto-parallel to the reference at
+  // depth d lands at y = d·A·x̃ + a in the neighbour (A = K_j R_ji K_i⁻¹, a = K_j t_ji).
+  Eigen::Matrix3d R_ji;
+  Eigen::Vector3d t_ji;
+  RelativePose(reference_view_, neighbor.view, &R_ji, &t_ji);
+  const Eigen::Matrix3f A = (neighbor.view.K * R_ji * reference_view_.K_inv).cast<float>();
+  const Eigen::Vector3f a = (neighbor.view.K * t_ji).cast<float>();
+  const int rad = options_.patch_radius_px, width = 2 * rad + 1, n = width * width;
+  const float inv2s2 = static_cast<float>(1.0 / (2.0 * options_.sigma * options_.sigma));
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, pixels_.size(), 4096),
+                    [&](const tbb::blocked_range<std::size_t>& range) {
+                      for (std::size_t i = range.begin(); i != range.end(); ++i) {
+                        Pixel& p = pixels_[i];
+                        const float* f = patches_.data() + i * 3 * n;
+                        Eigen::Vector3f diff = Eigen::Vector3f::Zero();
+                        int count = 0;
+                        for (int dy = -rad; dy <= rad; ++dy)
+                          for (int dx = -rad; dx <= rad; ++dx, f += 3) {
+                            const Eigen::Vector3f x(p.col + dx + 0.5f, p.row + dy + 0.5f, 1.0f);
+                            const Eigen::Vector3f y = p.d * (A * x) + a;
+                            Eigen::Vector3f g;
+                            if (!(y.z() > 0) || !SampleBgr(img, y.x() / y.z(), y.y() / y.z(), &g)) continue;
+                            for (int k = 0; k < 3; ++k) diff[k] += g[k] - f[k];
+                            ++count;
+                          }
+                        // The whole patch must land inside the neighbour.
+                        if (count < n) continue;
+                        diff /= static_cast<float>(n);
+                        p.sum[side] += std::exp(-diff.squaredNorm() * inv2s2);
+                        ++p.count[side];
+                      }
+                    });
+}
+
+cv::Mat DenseConsistencyAccumulator::Finish() {
+  cv::Mat rho(size_, CV_32F, cv::Scalar(-1.0f));
+  for (const Pixel& p : pixels_) {
+    float best = -1;
+    for (int s = 0; s < 2; ++s)
+      if (p.count[s] > 0) best = std::max(best, p.sum[s] / p.count[s]);
+    rho.at<float>(p.row, p.col) = best;
+  }
+  pixels_.clear();
+  patches_.clear();
+  return rho;
+}
+
+void ApplyDenseConsistency(const cv::Mat& rho, double rho_min, DepthMap* dense) {
+  if (rho.size() != dense->depth.size()) return;
+  const bool has_confidence = dense->confidence.size() == dense->depth.size();
+  const bool has_label = dense->label.size() == dense->depth.size();
+  for (int r = 0; r < rho.rows; ++r) {
+    const float* q = rho.ptr<float>(r);
+    for (int k = 0; k < rho.cols; ++k) {
+      if (q[k] < 0 || q[k] >= rho_min) continue;
+      dense->depth.at<float>(r, k) = 0;
+      if (has_confidence) dense->confidence.at<float>(r, k) = 0;
+      if (has_label) dense->label.at<std::uint8_t>(r, k) = static_cast<std::uint8_t>(DepthLabel::kNone);
+    }
+  }
+}
+
+void CheckDenseConsistency(const ViewImage& reference, const std::vector<const ViewImage*>& neighbors,
+                           const DenseConsistencyOptions& options, DepthMap* dense, const cv::Mat& own) {
+  if (options.views <= 0) return;
+  std::vector<const ViewImage*> usable;
+  std::vector<const PinholeView*> views;
+  for (const ViewImage* v : neighbors)
+    if (v && !v->image.empty() && v->image.type() == CV_32FC3) {
+      usable.push_back(v);
+      views.push_back(&v->view);
+    }
+  DenseConsistencyAccumulator acc(options);
+  acc.Begin(reference, *dense, own);
+  for (int j : acc.SelectNeighbors(reference.view, views)) acc.Add(*usable[static_cast<std::size_t>(j)]);
+  ApplyDenseConsistency(acc.Finish(), options.rho_min, dense);
+}
+
+}  // namespace lfrecon
