@@ -186,8 +186,9 @@ TEST(DenseConsistency, RemovesAHaloOfObjectDepthOverTexturedBackgroundAndKeepsTh
     }
   std::printf("halo %lld px, kept %.3f; object %lld px (%lld >= 3 px inside), kept %.3f\n", halo,
               double(halo_kept) / halo, object, inner, double(inner_kept) / inner);
-  EXPECT_LT(halo_kept, halo / 5);            // most of the halo goes (σ 0.05: 0.08 kept)
-  EXPECT_GE(inner_kept, inner * 99 / 100);  // the object stays (0.999)
+  EXPECT_LT(halo_kept, halo / 10);           // the halo goes (0.017 kept)
+  EXPECT_GE(inner_kept, inner * 92 / 100);  // the object stays (0.946: its fine, high-contrast
+                                            // texture loses a little to bilinear sampling)
   // Off: nothing changes.
   DenseConsistencyOptions off;
   off.views = 0;
