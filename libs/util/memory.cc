@@ -1,5 +1,7 @@
 #include "util/memory.h"
 
+#include <malloc.h>
+
 #include <fstream>
 #include <string>
 
@@ -17,5 +19,12 @@ std::int64_t ReadStatusKb(const std::string& key) {
 
 std::int64_t PeakRssBytes() { return ReadStatusKb("VmHWM:"); }
 std::int64_t CurrentRssBytes() { return ReadStatusKb("VmRSS:"); }
+
+void UseMmapForLargeBlocks() {
+#ifdef M_MMAP_THRESHOLD
+  // A fixed threshold also turns off glibc's dynamic raising of it.
+  mallopt(M_MMAP_THRESHOLD, 1 << 20);
+#endif
+}
 
 }  // namespace lfrecon

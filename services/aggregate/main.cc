@@ -7,9 +7,11 @@
 #include <iostream>
 
 #include "aggregator.h"
+#include "util/memory.h"
 #include "util/logging.h"
 
 int main(int argc, char** argv) {
+  lfrecon::UseMmapForLargeBlocks();
   using namespace lfrecon::svc;
   CLI::App app{"lfrecon-aggregate: volume aggregator and job coordinator of the lfrecon service"};
   AggregatorOptions o;

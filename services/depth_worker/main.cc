@@ -6,8 +6,10 @@
 
 #include "common/worker_loop.h"
 #include "depth/gradient_depth_estimator.h"
+#include "util/memory.h"
 
 int main(int argc, char** argv) {
+  lfrecon::UseMmapForLargeBlocks();
   using namespace lfrecon;
   using namespace lfrecon::svc;
   WorkerOptions o;

@@ -14,6 +14,7 @@
 #include "common/job_store.h"
 #include "common/messaging.h"
 #include "io/dataset.h"
+#include "util/memory.h"
 #include "util/error.h"
 #include "util/logging.h"
 #include "util/progress.h"
@@ -133,6 +134,7 @@ int Serve(const IngestOptions& o) {
 }  // namespace lfrecon::svc
 
 int main(int argc, char** argv) {
+  lfrecon::UseMmapForLargeBlocks();
   using namespace lfrecon::svc;
   CLI::App app{"lfrecon-ingest: reads, validates, undistorts and spools the frames of submitted jobs"};
   IngestOptions o;

@@ -8,10 +8,12 @@
 
 #include "commands.h"
 #include "lfrecon_version.h"
+#include "util/memory.h"
 #include "util/error.h"
 #include "util/logging.h"
 
 int main(int argc, char** argv) {
+  lfrecon::UseMmapForLargeBlocks();
   CLI::App app{"lfrecon: meshes with thin features from dense light fields (Depth from Gradients, 3DV 2016)"};
   app.set_version_flag("--version", std::string("lfrecon ") + LFRECON_VERSION);
   app.require_subcommand(1);

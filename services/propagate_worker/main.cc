@@ -11,8 +11,10 @@
 #include "common/worker_loop.h"
 #include "depth/depth_filter.h"
 #include "propagation/depth_propagator.h"
+#include "util/memory.h"
 
 int main(int argc, char** argv) {
+  lfrecon::UseMmapForLargeBlocks();
   using namespace lfrecon;
   using namespace lfrecon::svc;
   WorkerOptions o;

@@ -178,6 +178,7 @@ class EightBitSource : public FrameSource {
 }  // namespace lfrecon
 
 int main(int argc, char** argv) {
+  lfrecon::UseMmapForLargeBlocks();
   std::string mode = "exact", scene = "tabletop", mesh_out;
   DenseConsistencyOptions consistency;
   int max_frame_gap = StreamingDepthOptions{}.max_frame_gap;
