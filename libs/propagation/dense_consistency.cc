@@ -5,6 +5,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <opencv2/imgproc.hpp>
 
 #include "propagation/image_sampling.h"
 #include "util/error.h"
@@ -62,41 +63,51 @@ std::vector<int> DenseConsistencyAccumulator::SelectNeighbors(
   return out;
 }
 
+namespace {
+
+// Mean colour over (2r+1)² pixels at every pixel (CV_32FC3).
+cv::Mat PatchMeans(const cv::Mat& bgr, int r) {
+  if (r <= 0) return bgr;
+  cv::Mat out;
+  cv::blur(bgr, out, cv::Size(2 * r + 1, 2 * r + 1), cv::Point(-1, -1), cv::BORDER_REPLICATE);
+  return out;
+}
+
+}  // namespace
+
 void DenseConsistencyAccumulator::Begin(const ViewImage& reference, const DepthMap& dense, const cv::Mat& own) {
   pixels_.clear();
   reference_view_ = reference.view;
   size_ = dense.depth.size();
-  patches_.clear();
   if (dense.depth.empty() || dense.depth.type() != CV_32F || reference.image.size() != dense.depth.size() ||
       reference.image.type() != CV_32FC3 || dense.label.size() != dense.depth.size())
     return;
-  const cv::Mat& img = Colours(reference);
+  const cv::Mat means = PatchMeans(Colours(reference), options_.patch_radius_px);
   const bool skip_own = own.size() == dense.depth.size() && own.type() == CV_32F;
-  const int rad = options_.patch_radius_px, side = 2 * rad + 1;
   constexpr std::uint8_t kFg = static_cast<std::uint8_t>(DepthLabel::kForeground);
-  for (int r = rad; r + rad < dense.depth.rows; ++r) {
+  for (int r = 0; r < dense.depth.rows; ++r) {
     const float* d = dense.depth.ptr<float>(r);
     const std::uint8_t* l = dense.label.ptr<std::uint8_t>(r);
     const float* o = skip_own ? own.ptr<float>(r) : nullptr;
-    for (int c = rad; c + rad < dense.depth.cols; ++c) {
+    const float* m = means.ptr<float>(r);
+    for (int c = 0; c < dense.depth.cols; ++c) {
       if (!(d[c] > 0) || l[c] != kFg || (o && o[c] > 0)) continue;
       Pixel p;
       p.row = r;
       p.col = c;
       p.d = d[c];
+      for (int k = 0; k < 3; ++k) p.colour[k] = m[3 * c + k];
       pixels_.push_back(p);
-      // The patch's colours (whole pixels of the reference, row by row).
-      for (int dy = -rad; dy <= rad; ++dy) {
-        const float* bgr = img.ptr<float>(r + dy) + 3 * (c - rad);
-        patches_.insert(patches_.end(), bgr, bgr + 3 * side);
-      }
     }
   }
 }
 
 void DenseConsistencyAccumulator::Add(const ViewImage& neighbor) {
   if (pixels_.empty() || neighbor.image.empty() || neighbor.image.type() != CV_32FC3) return;
-  const cv::Mat& img = Colours(neighbor);
+  // The neighbour's patch means sampled at the projection of the pixel's
+  // centre: at ≤ 5° the plane's mapping is locally a translation, so this is
+  // the mean over the mapped patch, for one bilinear sample instead of (2r+1)².
+  const cv::Mat means = PatchMeans(Colours(neighbor), options_.patch_radius_px);
   const int side = SideOf(reference_view_, neighbor.view);
   // A reference pixel x̃ on the plane fronto-parallel to the reference at
   // depth d lands at y = d·A·x̃ + a in the neighbour (A = K_j R_ji K_i⁻¹, a = K_j t_ji).
@@ -105,28 +116,23 @@ void DenseConsistencyAccumulator::Add(const ViewImage& neighbor) {
   RelativePose(reference_view_, neighbor.view, &R_ji, &t_ji);
   const Eigen::Matrix3f A = (neighbor.view.K * R_ji * reference_view_.K_inv).cast<float>();
   const Eigen::Vector3f a = (neighbor.view.K * t_ji).cast<float>();
-  const int rad = options_.patch_radius_px, width = 2 * rad + 1, n = width * width;
+  const float margin = static_cast<float>(options_.patch_radius_px);
+  const float max_x = static_cast<float>(means.cols) - margin, max_y = static_cast<float>(means.rows) - margin;
   const float inv2s2 = static_cast<float>(1.0 / (2.0 * options_.sigma * options_.sigma));
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, pixels_.size(), 4096),
                     [&](const tbb::blocked_range<std::size_t>& range) {
                       for (std::size_t i = range.begin(); i != range.end(); ++i) {
                         Pixel& p = pixels_[i];
-                        const float* f = patches_.data() + i * 3 * n;
-                        Eigen::Vector3f diff = Eigen::Vector3f::Zero();
-                        int count = 0;
-                        for (int dy = -rad; dy <= rad; ++dy)
-                          for (int dx = -rad; dx <= rad; ++dx, f += 3) {
-                            const Eigen::Vector3f x(p.col + dx + 0.5f, p.row + dy + 0.5f, 1.0f);
-                            const Eigen::Vector3f y = p.d * (A * x) + a;
-                            Eigen::Vector3f g;
-                            if (!(y.z() > 0) || !SampleBgr(img, y.x() / y.z(), y.y() / y.z(), &g)) continue;
-                            for (int k = 0; k < 3; ++k) diff[k] += g[k] - f[k];
-                            ++count;
-                          }
+                        const Eigen::Vector3f y = p.d * (A * Eigen::Vector3f(p.col + 0.5f, p.row + 0.5f, 1.0f)) + a;
+                        if (!(y.z() > 0)) continue;
+                        const float u = y.x() / y.z(), v = y.y() / y.z();
                         // The whole patch must land inside the neighbour.
-                        if (count < n) continue;
-                        diff /= static_cast<float>(n);
-                        p.sum[side] += std::exp(-diff.squaredNorm() * inv2s2);
+                        if (!(u >= margin && v >= margin && u <= max_x && v <= max_y)) continue;
+                        Eigen::Vector3f g;
+                        if (!SampleBgr(means, u, v, &g)) continue;
+                        float e = 0;
+                        for (int k = 0; k < 3; ++k) e += (g[k] - p.colour[k]) * (g[k] - p.colour[k]);
+                        p.sum[side] += std::exp(-e * inv2s2);
                         ++p.count[side];
                       }
                     });
@@ -141,7 +147,6 @@ cv::Mat DenseConsistencyAccumulator::Finish() {
     rho.at<float>(p.row, p.col) = best;
   }
   pixels_.clear();
-  patches_.clear();
   return rho;
 }
 

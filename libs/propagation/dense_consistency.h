@@ -72,6 +72,7 @@ class DenseConsistencyAccumulator {
   struct Pixel {
     int row = 0, col = 0;
     float d = 0;
+    float colour[3] = {0, 0, 0};  // the reference's patch mean
     float sum[2] = {0, 0};
     int count[2] = {0, 0};
   };
@@ -79,7 +80,6 @@ class DenseConsistencyAccumulator {
   PinholeView reference_view_;
   cv::Size size_;
   std::vector<Pixel> pixels_;
-  std::vector<float> patches_;  // per pixel its (2r+1)² BGR reference colours
 };
 
 // Pixels where ρ (Finish's map) is evaluated and below rho_min lose their
