@@ -9,6 +9,7 @@
 #include <opencv2/imgproc.hpp>
 
 #include "propagation/image_sampling.h"
+#include "propagation/neighbor_views.h"
 #include "util/error.h"
 
 namespace lfrecon {
@@ -91,18 +92,6 @@ const cv::Mat& SourceImage(const ViewImage& v, const PhotoconsistencyOptions& o,
   if (!v.smoothed.empty() && v.smoothed.size() == v.image.size() && v.smoothed.type() == CV_32FC3) return v.smoothed;
   cv::GaussianBlur(v.image, *local, cv::Size(0, 0), o.presmooth_sigma);
   return *local;
-}
-
-bool UsableImage(const ViewImage* v) { return v && !v->image.empty() && v->image.type() == CV_32FC3; }
-
-// Degrees between the viewing directions, or a negative value when `nb` is
-// not to be used with `ref` (beyond the angle, or at the reference's centre).
-double UsableAngle(const PinholeView& ref, const PinholeView& nb, double max_angle_deg) {
-  const double cosang = std::clamp(ref.ViewingDirection().dot(nb.ViewingDirection()), -1.0, 1.0);
-  const double angle = std::acos(cosang) * 180.0 / M_PI;
-  if (angle > max_angle_deg) return -1;
-  if ((nb.Center() - ref.Center()).norm() < 1e-9) return -1;  // the reference itself
-  return angle;
 }
 
 }  // namespace

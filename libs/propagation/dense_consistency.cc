@@ -8,6 +8,7 @@
 #include <opencv2/imgproc.hpp>
 
 #include "propagation/image_sampling.h"
+#include "propagation/neighbor_views.h"
 #include "util/error.h"
 
 namespace lfrecon {
@@ -45,10 +46,8 @@ std::vector<int> DenseConsistencyAccumulator::SelectNeighbors(
   std::vector<std::pair<double, int>> side[2];
   for (std::size_t j = 0; j < neighbors.size(); ++j) {
     if (!neighbors[j]) continue;
-    if ((neighbors[j]->Center() - reference.Center()).norm() < 1e-9) continue;
-    const double cosang = std::clamp(reference.ViewingDirection().dot(neighbors[j]->ViewingDirection()), -1.0, 1.0);
-    const double angle = std::acos(cosang) * 180.0 / M_PI;
-    if (angle > options_.max_view_angle_deg) continue;
+    const double angle = UsableAngle(reference, *neighbors[j], options_.max_view_angle_deg);
+    if (angle < 0) continue;
     side[SideOf(reference, *neighbors[j])].emplace_back(angle, static_cast<int>(j));
   }
   for (auto& s : side)
@@ -103,7 +102,7 @@ void DenseConsistencyAccumulator::Begin(const ViewImage& reference, const DepthM
 }
 
 void DenseConsistencyAccumulator::Add(const ViewImage& neighbor) {
-  if (pixels_.empty() || neighbor.image.empty() || neighbor.image.type() != CV_32FC3) return;
+  if (pixels_.empty() || !UsableImage(&neighbor)) return;
   // The neighbour's patch means sampled at the projection of the pixel's
   // centre: at ≤ 5° the plane's mapping is locally a translation, so this is
   // the mean over the mapped patch, for one bilinear sample instead of (2r+1)².
@@ -171,7 +170,7 @@ void CheckDenseConsistency(const ViewImage& reference, const std::vector<const V
   std::vector<const ViewImage*> usable;
   std::vector<const PinholeView*> views;
   for (const ViewImage* v : neighbors)
-    if (v && !v->image.empty() && v->image.type() == CV_32FC3) {
+    if (UsableImage(v)) {
       usable.push_back(v);
       views.push_back(&v->view);
     }

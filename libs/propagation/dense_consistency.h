@@ -30,9 +30,11 @@ struct DenseConsistencyOptions {
   // evenly between its two sides where possible.
   // 0: no check.
   int views = 4;
-  // ρ compares the mean colours of (2r+1)² patches, the neighbour's mapped
-  // through the plane fronto-parallel to the reference at the pixel's depth
-  // (as §4.1 maps its samples): the mean keeps image noise from rejecting
+  // ρ compares the mean colours of (2r+1)² patches: the reference's around
+  // the pixel, the neighbour's (box-filtered once per neighbour) sampled where
+  // the pixel's centre lands through the plane fronto-parallel to the
+  // reference at its depth (as §4.1 maps its samples; at ≤ 5° that plane's
+  // mapping is locally a translation): the mean keeps image noise from rejecting
   // correct depths on flat colours (single pixels of the synthetic frames,
   // noise σ 0.01, give ρ ≈ 0.62 on a flat panel), while a halo's depth, tens
   // of pixels off, still compares different texture.
