@@ -23,6 +23,11 @@
 //   of the camera over the N frames (0: the scene's default, one turn).
 // --consistency V,RHO,R (pipeline mode): PropagationOptions::consistency views,
 //   rho_min, patch_radius_px (V = 0: no check); --max-frame-gap N: StreamingDepthOptions::max_frame_gap.
+// --view-stride K (pipeline mode): PipelineOptions::views = 0, K, 2K, ... (`lfrecon run --views
+//   0:N:K`): only those views get depth maps and are fused; every frame is still read and
+//   serves as a neighbour (hierarchy, photoconsistency). At 3000 frames a loop (0.12°) K = 5
+//   processes the views of the hierarchy grid (0.6° apart), whose sparse maps the filter
+//   needs anyway.
 // --8bit (pipeline mode): frames quantized to 8 bits as decoded PNG/video frames
 //   are (the renderer's are float); --no-compact: PipelineOptions::compact_frames
 //   off (windows hold CV_32FC3 frames).
@@ -183,6 +188,7 @@ int main(int argc, char** argv) {
   DenseConsistencyOptions consistency;
   int max_frame_gap = StreamingDepthOptions{}.max_frame_gap;
   int frames = 3000, width = 1280, height = 720, divisions = 256, report_every = 250, threads = 0, max_block = 16;
+  int view_stride = 1;
   double loops = 0, budget_mib = 1024;
   bool eval = false, refine = true, compare = false, eight_bit = false, compact = true;
   std::vector<double> budgets = {0, 64, 16};
@@ -216,6 +222,7 @@ int main(int argc, char** argv) {
                   &consistency.patch_radius_px);
     } else if (k == "--max-frame-gap") max_frame_gap = std::atoi(value().c_str());
     else if (k == "--no-compact") compact = false;
+    else if (k == "--view-stride") view_stride = std::atoi(value().c_str());
     else if (k == "--compare-exact") compare = true;
     else if (k == "--budgets-mib") {
       budgets.clear();
@@ -238,8 +245,8 @@ int main(int argc, char** argv) {
     if (threads > 0) control.emplace(tbb::global_control::max_allowed_parallelism, threads);
     return RunMaps(positional[0], positional[1], budgets, max_block);
   }
-  if ((mode != "exact" && mode != "pipeline") || frames < 1 || report_every < 1) {
-    std::fprintf(stderr, "bad --mode / --frames / --report-every\n");
+  if ((mode != "exact" && mode != "pipeline") || frames < 1 || report_every < 1 || view_stride < 1) {
+    std::fprintf(stderr, "bad --mode / --frames / --report-every / --view-stride\n");
     return 2;
   }
   std::optional<tbb::global_control> control;
@@ -361,6 +368,8 @@ int main(int argc, char** argv) {
   po.write_turntable = false;
   po.fusion.store_budget_bytes = budget;
   po.fusion.store_max_block = max_block;
+  if (view_stride > 1)
+    for (int i = 0; i < frames; i += view_stride) po.views.push_back(i);
   EmbeddedPipeline pipeline(views, volume, po);
   pipeline.SetViewCallback([&](int, int done, int n) {
     if (done % report_every == 0 || done == n) {
