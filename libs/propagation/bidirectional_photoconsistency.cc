@@ -126,17 +126,10 @@ std::vector<int> BidirectionalPhotoconsistency::SelectNeighbors(
 EdgeConsistency BidirectionalPhotoconsistency::Compute(const ViewImage& reference,
                                                        const std::vector<const ViewImage*>& neighbors,
                                                        const DepthMap& depth) const {
-  // Neighbours without a usable frame take no part in the selection.
-  std::vector<const ViewImage*> valid;
-  std::vector<const PinholeView*> views;
-  for (const ViewImage* nb : neighbors)
-    if (UsableImage(nb)) {
-      valid.push_back(nb);
-      views.push_back(&nb->view);
-    }
+  const UsableNeighbors usable = FindUsableNeighbors(neighbors);
   PhotoconsistencyAccumulator acc(options_);
   acc.Begin(reference, depth);
-  for (int j : SelectNeighbors(reference.view, views)) acc.Add(*valid[static_cast<std::size_t>(j)]);
+  for (int j : SelectNeighbors(reference.view, usable.views)) acc.Add(*usable.images[static_cast<std::size_t>(j)]);
   return acc.Finish();
 }
 

@@ -167,16 +167,10 @@ void ApplyDenseConsistency(const cv::Mat& rho, double rho_min, DepthMap* dense) 
 void CheckDenseConsistency(const ViewImage& reference, const std::vector<const ViewImage*>& neighbors,
                            const DenseConsistencyOptions& options, DepthMap* dense, const cv::Mat& own) {
   if (options.views <= 0) return;
-  std::vector<const ViewImage*> usable;
-  std::vector<const PinholeView*> views;
-  for (const ViewImage* v : neighbors)
-    if (UsableImage(v)) {
-      usable.push_back(v);
-      views.push_back(&v->view);
-    }
+  const UsableNeighbors usable = FindUsableNeighbors(neighbors);
   DenseConsistencyAccumulator acc(options);
   acc.Begin(reference, *dense, own);
-  for (int j : acc.SelectNeighbors(reference.view, views)) acc.Add(*usable[static_cast<std::size_t>(j)]);
+  for (int j : acc.SelectNeighbors(reference.view, usable.views)) acc.Add(*usable.images[static_cast<std::size_t>(j)]);
   ApplyDenseConsistency(acc.Finish(), options.rho_min, dense);
 }
 

@@ -35,8 +35,8 @@ struct Aggregator::Job {
   bool active = false;  // running: the fusion thread is up, results are taken
   JobGeometry geo;      // constant once loaded (the fusion thread reads it too)
   int n = 0;
-  ViewGraph near, wide, photo;
-  std::vector<char> on_grid;  // HierarchyGrid: the filter's voters (FilterVoters)
+  ViewGraph near, photo;
+  std::vector<std::vector<int>> voters;  // per view: FilterVoters (sparse maps voting in its filter)
   std::vector<char> frame_ok, sparse_ok, dense_ok;
   int frames_spooled = 0, sparse_done = 0, dense_done = 0;  // dense_done: maps received (stored)
   bool ingest_done = false;
@@ -249,9 +249,11 @@ std::unique_ptr<Aggregator::Job> Aggregator::LoadJob(const std::string& id) {
   std::vector<Eigen::Vector3d> dirs;
   for (const auto& v : job->geo.views) dirs.push_back(v.ViewingDirection());
   job->near = ViewGraph(dirs, po.depth.gradient.max_view_angle_deg, po.depth.max_frame_gap);
-  job->wide = ViewGraph(dirs, po.depth.filter.max_view_angle_deg, po.depth.max_frame_gap);
   job->photo = ViewGraph(dirs, po.propagation.photo.max_view_angle_deg, po.depth.max_frame_gap);
-  job->on_grid = HierarchyGrid(job->geo.views, po.depth.gradient);
+  const std::vector<char> on_grid = HierarchyGrid(job->geo.views, po.depth.gradient);
+  job->voters.resize(n);
+  const ViewGraph wide(dirs, po.depth.filter.max_view_angle_deg, po.depth.max_frame_gap);
+  for (int v = 0; v < n; ++v) job->voters[v] = FilterVoters(wide, on_grid, v);
   job->frame_ok.assign(n, 0);
   job->sparse_ok.assign(n, 0);
   job->dense_ok.assign(n, 0);
@@ -468,7 +470,7 @@ pb::Envelope Aggregator::HandleTaskRequest(const pb::Envelope& req) {
         for (int j : job.near.Neighbors(v)) task->add_frames(j);
       } else {
         if (job.dense_ok[v] || !job.sparse_ok[v]) continue;
-        const std::vector<int> voters = FilterVoters(job.wide, job.on_grid, v);
+        const std::vector<int>& voters = job.voters[v];
         bool ready = true;
         for (int j : voters) ready = ready && job.sparse_ok[j];
         if (!ready) continue;
