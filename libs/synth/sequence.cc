@@ -4,6 +4,7 @@
 #include <cstdio>
 
 #include "synth/gt_mesh.h"
+#include "synth/texture.h"
 #include "synth/scenes.h"
 #include "util/error.h"
 
@@ -16,6 +17,7 @@ void SynthOptions::Check() const {
   LFRECON_CHECK_OPTION(std::isfinite(hfov_deg) && hfov_deg > 0 && hfov_deg < 180);
   LFRECON_CHECK_OPTION(std::isfinite(loops) && loops >= 0);
   render.Check();
+  degradation.Check();
 }
 
 SynthSequence SynthSequence::Create(const SynthOptions& options) {
@@ -31,17 +33,26 @@ SynthSequence SynthSequence::Create(const SynthOptions& options) {
     path.loops = 3;
   return SynthSequence(std::move(setup.scene),
                        Camera::PinholeFromHfov(options.width, options.height, options.hfov_deg), path,
-                       options.render, options.seed);
+                       options.render, options.seed, options.degradation);
 }
 
 SynthSequence::SynthSequence(Scene scene, Camera camera, CameraPathOptions path, RenderOptions render,
-                             std::uint64_t seed)
-    : scene_(std::move(scene)), camera_(std::move(camera)), path_(path), render_(render), seed_(seed) {
+                             std::uint64_t seed, DegradationOptions degradation)
+    : scene_(std::move(scene)),
+      camera_(std::move(camera)),
+      path_(path),
+      render_(render),
+      seed_(seed),
+      degradation_(degradation) {
   const std::string problem = camera_.Validate();
   if (!problem.empty()) throw OptionError("synth: bad camera: " + problem);
   if (camera_.HasDistortion()) throw OptionError("synth: the camera must be distortion-free");
   render_.Check();
+  degradation_.Check();
   poses_ = MakeCameraPath(path_);
+  given_poses_.reserve(poses_.size());
+  for (int i = 0; i < NumFrames(); ++i)
+    given_poses_.push_back(PerturbPose(poses_[static_cast<std::size_t>(i)], degradation_, seed_, i));
 }
 
 double SynthSequence::hfov_deg() const {
@@ -62,7 +73,53 @@ RenderResult SynthSequence::Render(int i) const {
   if (i < 0 || i >= NumFrames())
     throw std::out_of_range("synth: frame " + std::to_string(i) + " out of range [0, " +
                             std::to_string(NumFrames()) + ")");
-  return synth::Render(scene_, View(i), render_, FrameSeed(i));
+  const DegradationOptions& d = degradation_;
+  if (d.motion_blur == 0 && d.exposure_drift == 0) return synth::Render(scene_, View(i), render_, FrameSeed(i));
+
+  // Blur and gain act on the light before the sensor's noise and 8-bit
+  // levels; with blur the mean of K renders carries noise σ·√K/√K = σ.
+  RenderOptions sub = render_;
+  sub.quantize = false;
+  RenderResult out;
+  if (d.motion_blur > 0) {
+    const int K = d.motion_blur_samples;
+    sub.noise_sigma = render_.noise_sigma * std::sqrt(static_cast<double>(K));
+    cv::Mat sum;
+    for (int k = 0; k < K; ++k) {
+      // Shutter time t in [i - F/2, i + F/2] (frame units), between path poses.
+      const double t = i + d.motion_blur * ((k + 0.5) / K - 0.5);
+      const int j = static_cast<int>(std::floor(t));
+      const Rigid3d pose =
+          InterpolatePose(CameraPathPose(path_, j), CameraPathPose(path_, j + 1), t - j);
+      RenderResult r = synth::Render(scene_, PinholeView(camera_, pose), sub,
+                                     HashCombine(FrameSeed(i), static_cast<std::uint64_t>(k + 1)));
+      if (k == 0)
+        sum = r.image.clone();
+      else
+        sum += r.image;
+    }
+    out.image = sum / static_cast<double>(K);
+    // Depth and labels of the frame's own (true) pose.
+    const RenderResult centre = synth::Render(scene_, View(i), [&] {
+      RenderOptions o = sub;
+      o.noise_sigma = 0;
+      return o;
+    }(), FrameSeed(i));
+    out.depth = centre.depth;
+    out.labels = centre.labels;
+    out.mixed = centre.mixed;
+  } else {
+    out = synth::Render(scene_, View(i), sub, FrameSeed(i));
+  }
+  const double gain = ExposureGain(d, i, NumFrames());
+  if (gain != 1.0) out.image *= gain;
+  cv::min(out.image, 1.0, out.image);
+  cv::max(out.image, 0.0, out.image);
+  if (render_.quantize) {
+    out.image.convertTo(out.image, CV_8UC3, 255.0);
+    out.image.convertTo(out.image, CV_32FC3, 1.0 / 255.0);
+  }
+  return out;
 }
 
 TriangleMesh SynthSequence::GroundTruthMesh(bool thin_only) const {

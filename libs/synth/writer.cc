@@ -42,6 +42,21 @@ nlohmann::json SceneJson(const SynthSequence& seq, const SynthWriteOptions& opti
   j["loops"] = seq.path().loops;
   j["samples"] = S * S;
   j["noise_sigma"] = seq.render_options().noise_sigma;
+  j["format"] = options.format;
+  if (options.format == "jpg") j["jpeg_quality"] = options.jpeg_quality;
+  const DegradationOptions& d = seq.degradation();
+  j["exposure_drift"] = d.exposure_drift;
+  j["pose_rotation_deg"] = d.pose_rotation_deg;
+  j["pose_translation_mm"] = d.pose_translation_mm;
+  j["motion_blur"] = d.motion_blur;
+  if (d.pose_rotation_deg > 0 || d.pose_translation_mm > 0) {
+    // The true poses, so a reader can measure pose error and its refinement.
+    nlohmann::json poses = nlohmann::json::array();
+    for (const Rigid3d& p : seq.poses())
+      poses.push_back({p.rotation.w(), p.rotation.x(), p.rotation.y(), p.rotation.z(), p.translation.x(),
+                       p.translation.y(), p.translation.z()});
+    j["true_cam_from_world_qwxyz_t"] = poses;
+  }
   j["foreground_bbox_min"] = {V.min.x(), V.min.y(), V.min.z()};
   j["foreground_bbox_max"] = {V.max.x(), V.max.y(), V.max.z()};
   j["thin_radius"] = seq.scene().thin_radius();
@@ -95,9 +110,9 @@ SynthWriteSummary WriteSynthDataset(const SynthSequence& seq, const SynthWriteOp
     image.image_id = static_cast<std::uint32_t>(i + 1);
     image.camera_id = 1;
     image.name = SynthSequence::ImageName(i, options.format);
-    image.cam_from_world = seq.cam_from_world(i);
+    image.cam_from_world = seq.given_cam_from_world(i);  // with the degradation's pose error, if any
     model.images.push_back(image);
-    frames.push_back({"images/" + image.name, seq.camera(), seq.cam_from_world(i)});
+    frames.push_back({"images/" + image.name, seq.camera(), seq.given_cam_from_world(i)});
   }
   WriteColmapModelText(model, out / "sparse");
   WriteTransformsJson(frames, out / "transforms.json");

@@ -19,6 +19,7 @@ struct SynthFlags {
   synth::SynthOptions options;
   std::string path = "circle";
   std::string format = "png";
+  int jpeg_quality = 95;
   int depth_every = 8;
   bool no_meshes = false;
   bool full_aa = false;
@@ -43,6 +44,7 @@ int RunSynth(SynthFlags flags) {
   synth::SynthWriteOptions write;
   write.out_dir = flags.out;
   write.format = flags.format;
+  write.jpeg_quality = flags.jpeg_quality;
   write.depth_every = flags.depth_every;
   write.write_meshes = !flags.no_meshes;
   write.Check();
@@ -98,6 +100,26 @@ void AddSynthCommand(CLI::App& root, int* exit_code) {
       ->capture_default_str();
   cmd->add_option("--format", flags->format, "Image format: png or jpg")->capture_default_str();
   cmd->add_option("--noise", o.render.noise_sigma, "Gaussian noise sigma per channel, colours in [0, 1]")
+      ->capture_default_str();
+  cmd->add_option("--jpeg-quality", flags->jpeg_quality, "JPEG quality of --format jpg (1-100)")
+      ->capture_default_str();
+  cmd->add_option("--exposure-drift", o.degradation.exposure_drift,
+                  "Relative amplitude of a sinusoidal exposure gain over the sequence (0.04: +-4 %)")
+      ->capture_default_str();
+  cmd->add_option("--exposure-cycles", o.degradation.exposure_cycles, "Periods of the exposure drift over the sequence")
+      ->capture_default_str();
+  cmd->add_option("--pose-rot-deg", o.degradation.pose_rotation_deg,
+                  "Per-frame rotation error (RMS, degrees) of the written poses; frames render from the true poses, "
+                  "which scene.json keeps")
+      ->capture_default_str();
+  cmd->add_option("--pose-trans-mm", o.degradation.pose_translation_mm,
+                  "Per-frame camera-centre error (RMS, mm) of the written poses")
+      ->capture_default_str();
+  cmd->add_option("--motion-blur", o.degradation.motion_blur,
+                  "Shutter open for this fraction of the interval between frames (0: none; rendered as the mean "
+                  "of --motion-blur-samples renders)")
+      ->capture_default_str();
+  cmd->add_option("--motion-blur-samples", o.degradation.motion_blur_samples, "Renders averaged per blurred frame")
       ->capture_default_str();
   cmd->add_option("--supersampling", o.render.supersampling, "S x S samples per pixel")
       ->capture_default_str();
