@@ -13,6 +13,7 @@
 
 #include "geometry/undistorter.h"
 #include "io/colmap_model.h"
+#include "io/json_file.h"
 #include "io/transforms_json.h"
 #include "util/error.h"
 
@@ -297,8 +298,7 @@ Dataset Dataset::Open(const DatasetOptions& options) {
   } else {
     bool from_scene = false;
     if (!root.empty() && IsFile(root / "scene.json")) {
-      std::ifstream in(root / "scene.json");
-      const json scene = json::parse(in, nullptr, /*allow_exceptions=*/false);
+      const json scene = ReadJsonFile(root / "scene.json");
       // A scene.json without the keys is not an error: V is then estimated.
       if (scene.is_object() &&
           (scene.contains("foreground_bbox_min") || scene.contains("foreground_bbox_max"))) {
@@ -360,14 +360,7 @@ std::optional<fs::path> Dataset::GroundTruthMeshPath(bool thin_only) const {
 
 BoundingBox ReadSceneJsonBoundingBox(const fs::path& path) {
   const std::string file = path.string();
-  std::ifstream in(path);
-  if (!in) throw InputError(file, "cannot open file");
-  json scene;
-  try {
-    scene = json::parse(in);
-  } catch (const json::exception& e) {
-    throw InputError(file, std::string("not valid JSON: ") + e.what());
-  }
+  const json scene = ReadJsonFile(path);
   auto vec = [&](const char* key) {
     if (!scene.is_object() || !scene.contains(key)) throw InputError(file, key, "missing");
     const json& a = scene[key];

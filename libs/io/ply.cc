@@ -251,6 +251,10 @@ TriangleMesh ReadPly(const fs::path& path) {
   bool have_vertices = false;
   for (const PlyElement& e : elements) {
     // Counts must be coverable by the bytes left, so a corrupt header cannot make us allocate.
+    // An entry without properties takes no bytes, so no file size bounds its count: refused.
+    if (e.properties.empty() && e.count > 0)
+      throw InputError(file, "element " + e.name,
+                       "has no properties but a count of " + std::to_string(e.count));
     const std::uint64_t min_bytes = e.MinBytes(binary);
     if (min_bytes > 0 && e.count > body.Remaining() / min_bytes)
       throw InputError(file, "element " + e.name,

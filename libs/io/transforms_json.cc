@@ -8,6 +8,7 @@
 #include <nlohmann/json.hpp>
 #include <optional>
 
+#include "io/json_file.h"
 #include "util/error.h"
 
 namespace lfrecon {
@@ -168,14 +169,7 @@ void PutIntrinsics(const Camera& camera, json* out) {
 
 std::vector<TransformsFrame> ReadTransformsJson(const fs::path& path) {
   const std::string file = path.string();
-  std::ifstream in(path);
-  if (!in) throw InputError(file, "cannot open file");
-  json root;
-  try {
-    root = json::parse(in);
-  } catch (const json::exception& e) {
-    throw InputError(file, std::string("not valid JSON: ") + e.what());
-  }
+  const json root = ReadJsonFile(path);  // depth-limited: no recursion on untrusted nesting
   if (!root.is_object() || !root.contains("frames") || !root["frames"].is_array())
     throw InputError(file, "frames", "missing or not an array");
   std::vector<TransformsFrame> frames;

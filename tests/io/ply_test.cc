@@ -1,6 +1,8 @@
 #include "io/ply.h"
 
 #include <gtest/gtest.h>
+#include <signal.h>
+#include <sys/wait.h>
 #include <unistd.h>
 
 #include <algorithm>
@@ -201,6 +203,49 @@ TEST(PlyBadInput, TruncatedAndCorrupt) {
   ExpectInputError([&] { ReadPly(p); }, {"m.ply", "vertex 0", "zero"});
   std::ofstream(p) << "solid stl\n";
   ExpectInputError([&] { ReadPly(p); }, {"m.ply", "not a PLY"});
+}
+
+// `f` in a child process: its exit code (0: InputError naming every needle; 1: other
+// outcome), or -1 if it did not finish within `seconds` (it is killed).
+int InputErrorWithin(const std::function<void()>& f, const std::vector<std::string>& needles, double seconds) {
+  const pid_t pid = ::fork();
+  if (pid == 0) {
+    int code = 1;
+    try {
+      f();
+    } catch (const InputError& e) {
+      code = 0;
+      for (const std::string& n : needles) code |= std::string(e.what()).find(n) == std::string::npos;
+    } catch (...) {
+    }
+    ::_exit(code);
+  }
+  int status = 0;
+  for (int i = 0; i < seconds * 100; ++i) {
+    if (::waitpid(pid, &status, WNOHANG) == pid) return WIFEXITED(status) ? WEXITSTATUS(status) : 1;
+    ::usleep(10000);
+  }
+  ::kill(pid, SIGKILL);
+  ::waitpid(pid, &status, 0);
+  return -1;
+}
+
+// An element without properties takes no bytes, so its count is bounded by
+// nothing: 2^64-1 of them kept the reader looping for ever. Refused at once.
+TEST(PlyBadInput, ElementWithoutPropertiesAndHugeCount) {
+  TempDir tmp;
+  const fs::path p = tmp.path() / "e.ply";
+  for (const char* format : {"ascii", "binary_little_endian"}) {
+    SCOPED_TRACE(format);
+    std::ofstream(p, std::ios::binary) << "ply\nformat " << format
+                                       << " 1.0\nelement empty 18446744073709551615\nelement vertex 1\n"
+                                          "property float x\nproperty float y\nproperty float z\nend_header\n0 0 0\n";
+    EXPECT_EQ(InputErrorWithin([&] { ReadPly(p); }, {"e.ply", "element empty", "no properties"}, 5), 0);
+  }
+  // A count of 0 without properties is harmless.
+  std::ofstream(p) << "ply\nformat ascii 1.0\nelement empty 0\nelement vertex 1\nproperty float x\n"
+                      "property float y\nproperty float z\nend_header\n1 2 3\n";
+  EXPECT_EQ(ReadPly(p).vertices.size(), 1u);
 }
 
 }  // namespace

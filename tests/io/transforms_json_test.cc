@@ -9,6 +9,7 @@
 #include <nlohmann/json.hpp>
 #include <random>
 
+#include "io/json_file.h"
 #include "util/error.h"
 #include "common/test_util.h"
 
@@ -155,6 +156,36 @@ TEST(TransformsJsonBadInput, NamesFileAndField) {
   std::ofstream(p) << R"({"w": 10, "h": 10, "fl_x": 10, "frames": [{"file_path": "x.png",
       "transform_matrix": [[1,0,0,0],[0,1,0,"a"],[0,0,1,0],[0,0,0,1]]}]})";
   ExpectInputError([&] { ReadTransformsJson(p); }, {"transforms.json", "x.png", "non-number"});
+}
+
+// A value nested a million deep (the stack overflowed in nlohmann::json's
+// recursive dump/copy of it): refused while parsing, naming the file.
+TEST(TransformsJsonBadInput, DeepNestingIsAnInputErrorNotACrash) {
+  TempDir tmp;
+  const fs::path p = tmp.path() / "transforms.json";
+  const int deep = 1000000;
+  {
+    std::ofstream f(p);
+    f << R"({"h": 10, "fl_x": 10, "w": )" << std::string(deep, '[') << std::string(deep, ']')
+      << R"(, "frames": [{"file_path": "x.png", "transform_matrix": [[1,0,0,0],[0,1,0,0],[0,0,1,0],[0,0,0,1]]}]})";
+  }
+  ExpectInputError([&] { ReadTransformsJson(p); }, {"transforms.json", "nested deeper than"});
+  {
+    std::ofstream f(p);  // objects too
+    f << R"({"frames": [], "x": )";
+    for (int i = 0; i < deep; ++i) f << R"({"a":)";
+    f << "1" << std::string(deep, '}') << "}";
+  }
+  ExpectInputError([&] { ReadTransformsJson(p); }, {"transforms.json", "nested deeper than"});
+  // At the limit it parses; one deeper is refused.
+  auto nested = [&](int levels) {
+    std::ofstream f(p);
+    f << std::string(levels, '[') << std::string(levels, ']');
+  };
+  nested(kMaxJsonDepth);
+  EXPECT_TRUE(ReadJsonFile(p).is_array());
+  nested(kMaxJsonDepth + 1);
+  ExpectInputError([&] { ReadJsonFile(p); }, {"transforms.json", "nested deeper than 64"});
 }
 
 }  // namespace
