@@ -86,8 +86,14 @@ class DatasetFrameSource : public FrameSource {
       inner_ = std::make_unique<VideoSource>(video_path_);
     } else {
       std::vector<std::string> names;
-      for (const DatasetView& v : views_) names.push_back(v.name);
-      inner_ = std::make_unique<ImageFolderSource>(images_dir_, std::move(names));
+      std::vector<cv::Size> sizes;  // each image's header is checked against its camera before decoding
+      for (const DatasetView& v : views_) {
+        names.push_back(v.name);
+        sizes.emplace_back(v.camera.width, v.camera.height);
+      }
+      auto folder = std::make_unique<ImageFolderSource>(images_dir_, std::move(names));
+      folder->ExpectSizes(std::move(sizes));
+      inner_ = std::move(folder);
     }
   }
 

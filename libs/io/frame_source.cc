@@ -6,6 +6,9 @@
 #include <cctype>
 #include <cstring>
 #include <cstdio>
+#include <fstream>
+#include <iterator>
+#include <limits>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 #include <opencv2/videoio.hpp>
@@ -96,19 +99,125 @@ cv::Mat CompactFrame(const cv::Mat& frame) {
 
 cv::Mat ExpandFrame(const cv::Mat& pixels) { return pixels.depth() == CV_8U ? ToFloatBgr(pixels) : pixels; }
 
-cv::Mat ReadImageFloat(const fs::path& path) {
+namespace {
+
+int Be16(const std::string& b, std::size_t at) {
+  return (static_cast<unsigned char>(b[at]) << 8) | static_cast<unsigned char>(b[at + 1]);
+}
+
+std::optional<ImageHeader> ReadPngHeader(const std::string& b) {
+  // Signature, then the IHDR chunk: length, "IHDR", width and height (big-endian).
+  static const char kSignature[] = "\x89PNG\r\n\x1a\n";
+  if (b.size() < 24 || b.compare(0, 8, kSignature, 8) != 0 || b.compare(12, 4, "IHDR") != 0) return std::nullopt;
+  auto be32 = [&](std::size_t at) {
+    return (std::uint32_t{static_cast<unsigned char>(b[at])} << 24) | (std::uint32_t(Be16(b, at + 1)) << 8) |
+           static_cast<unsigned char>(b[at + 3]);
+  };
+  ImageHeader h;
+  h.format = "png";
+  const std::uint32_t w = be32(16), hh = be32(20);
+  h.width = static_cast<int>(std::min<std::uint32_t>(w, 1u << 30));
+  h.height = static_cast<int>(std::min<std::uint32_t>(hh, 1u << 30));
+  return h;
+}
+
+std::optional<ImageHeader> ReadJpegHeader(const std::string& b) {
+  const std::size_t n = b.size();
+  if (n < 4 || static_cast<unsigned char>(b[0]) != 0xFF || static_cast<unsigned char>(b[1]) != 0xD8)
+    return std::nullopt;
+  ImageHeader h;
+  h.format = "jpeg";
+  h.complete = false;
+  auto at = [&](std::size_t i) { return static_cast<unsigned char>(b[i]); };
+  std::size_t pos = 2;
+  while (pos < n) {
+    if (at(pos) != 0xFF) return h;  // not at a marker: corrupt
+    while (pos < n && at(pos) == 0xFF) ++pos;  // fill bytes
+    if (pos >= n) return h;
+    const unsigned char m = at(pos++);
+    if (m == 0xD9) {  // EOI
+      h.complete = true;
+      return h;
+    }
+    if (m == 0x01 || (m >= 0xD0 && m <= 0xD7)) continue;  // no length
+    if (pos + 2 > n) return h;
+    const std::size_t length = static_cast<std::size_t>(Be16(b, pos));
+    if (length < 2 || pos + length > n) return h;
+    const bool sof = m >= 0xC0 && m <= 0xCF && m != 0xC4 && m != 0xC8 && m != 0xCC;
+    if (sof && length >= 7 && h.width == 0) {
+      h.height = Be16(b, pos + 3);
+      h.width = Be16(b, pos + 5);
+    }
+    pos += length;
+    if (m == 0xDA) {  // start of scan: entropy-coded data up to the next marker
+      while (pos + 1 < n) {
+        if (at(pos) != 0xFF) {
+          ++pos;
+        } else if (at(pos + 1) == 0x00 || (at(pos + 1) >= 0xD0 && at(pos + 1) <= 0xD7)) {
+          pos += 2;  // stuffed 0xFF or a restart marker
+        } else if (at(pos + 1) == 0xFF) {
+          ++pos;
+        } else {
+          break;
+        }
+      }
+      if (pos + 1 >= n) return h;  // the data ends inside a scan: truncated
+    }
+  }
+  return h;
+}
+
+}  // namespace
+
+std::optional<ImageHeader> ReadImageHeader(const std::string& bytes) {
+  if (auto h = ReadPngHeader(bytes)) return h;
+  return ReadJpegHeader(bytes);
+}
+
+cv::Mat ReadImageFloat(const fs::path& path, std::optional<cv::Size> expect) {
+  const std::string file = path.string();
   std::error_code ec;
-  if (!fs::is_regular_file(path, ec)) throw InputError(path.string(), "image file does not exist");
+  if (!fs::is_regular_file(path, ec)) throw InputError(file, "image file does not exist");
   if (Lower(path.extension().string()) == ".exr") EnableOpenCvExr();
+  std::string bytes;
+  {
+    std::ifstream in(path, std::ios::binary);
+    if (!in) throw InputError(file, "cannot open image file");
+    bytes.assign(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
+    if (in.bad()) throw InputError(file, "read failed");
+    if (bytes.size() > static_cast<std::size_t>(std::numeric_limits<int>::max()))
+      throw InputError(file, "image file larger than 2 GiB");
+  }
+  auto check_size = [&](int width, int height, const char* what) {
+    if (expect && (width != expect->width || height != expect->height))
+      throw InputError(file, std::string(what) + " is " + std::to_string(width) + "x" + std::to_string(height) +
+                                 " but its camera is " + std::to_string(expect->width) + "x" +
+                                 std::to_string(expect->height));
+    if (static_cast<std::int64_t>(width) * height > kMaxImagePixels)
+      throw InputError(file, std::string(what) + " is " + std::to_string(width) + "x" + std::to_string(height) +
+                                 ": more than the " + std::to_string(kMaxImagePixels) + " pixels a frame may have");
+  };
+  const auto header = ReadImageHeader(bytes);
+  if (header) {
+    if (!header->complete)
+      throw InputError(file, "JPEG data ends before its end-of-image marker (truncated or corrupt file)");
+    if (header->width > 0 || header->format == "png") check_size(header->width, header->height, "image header");
+  }
   cv::Mat raw;
   try {
     // IMREAD_UNCHANGED: keep 16-bit data and ignore EXIF orientation, as COLMAP does,
-    // so that image sizes agree with the cameras.
-    raw = cv::imread(path.string(), cv::IMREAD_UNCHANGED);
+    // so that image sizes agree with the cameras. PNG/JPEG from the bytes read;
+    // other formats from the file (some OpenCV decoders read files only).
+    if (header)
+      raw = cv::imdecode(cv::Mat(1, static_cast<int>(bytes.size()), CV_8U, bytes.data()), cv::IMREAD_UNCHANGED);
+    else
+      raw = cv::imread(file, cv::IMREAD_UNCHANGED);
   } catch (const cv::Exception& e) {
-    throw InputError(path.string(), std::string("image cannot be decoded: ") + e.what());
+    throw InputError(file, std::string("image cannot be decoded: ") + e.what());
   }
-  if (raw.empty()) throw InputError(path.string(), "image cannot be read (corrupt or unsupported format)");
+  if (raw.empty()) throw InputError(file, "image cannot be read (corrupt or unsupported format)");
+  bytes = std::string();
+  check_size(raw.cols, raw.rows, "image");
   try {
     return ToFloatBgr(raw);
   } catch (const std::invalid_argument& e) {
@@ -168,7 +277,8 @@ Frame ImageFolderSource::Read(int index) {
   Frame frame;
   frame.index = index;
   frame.name = names_[index];
-  frame.image = ReadImageFloat(folder_ / names_[index]);
+  frame.image = ReadImageFloat(folder_ / names_[index],
+                               sizes_.empty() ? std::nullopt : std::optional<cv::Size>(sizes_.at(index)));
   return frame;
 }
 

@@ -3,7 +3,9 @@
 // the whole sequence in memory. Images are CV_32FC3, BGR (OpenCV's channel
 // order), values in [0, 1].
 #include <filesystem>
+#include <cstdint>
 #include <memory>
+#include <optional>
 #include <opencv2/core.hpp>
 #include <string>
 #include <vector>
@@ -39,8 +41,27 @@ cv::Mat ToFloatBgr(const cv::Mat& image);
 // same floats bit for bit.
 cv::Mat CompactFrame(const cv::Mat& frame);
 cv::Mat ExpandFrame(const cv::Mat& pixels);
+// What a PNG or JPEG header says, read without decoding any pixel.
+struct ImageHeader {
+  std::string format;  // "png" or "jpeg"
+  int width = 0, height = 0;  // 0: no size found (JPEG without a frame header)
+  // JPEG: the marker structure reaches the end-of-image marker (EOI). A file
+  // cut short lacks it; libjpeg then only warns and fills the rest with grey.
+  bool complete = true;
+};
+// The header of PNG (IHDR) or JPEG (SOFn; EOI searched by walking the
+// segments and entropy-coded data) bytes; nullopt for other formats.
+std::optional<ImageHeader> ReadImageHeader(const std::string& bytes);
+
+// Frames larger than this are refused before they are decoded (~1.2 GB as floats).
+constexpr std::int64_t kMaxImagePixels = std::int64_t{100} << 20;
+
 // Reads one image file as CV_32FC3 BGR in [0, 1]; throws InputError naming it.
-cv::Mat ReadImageFloat(const std::filesystem::path& path);
+// PNG and JPEG headers are checked before decoding: the size against `expect`
+// (the frame's camera, when given) and kMaxImagePixels; a JPEG without its
+// end-of-image marker (truncated) is refused rather than decoded half grey.
+// Other formats are decoded first, then checked.
+cv::Mat ReadImageFloat(const std::filesystem::path& path, std::optional<cv::Size> expect = std::nullopt);
 // Writes CV_32FC3 [0, 1] (or 8-bit) to PNG/JPEG (by extension); throws InputError naming it.
 void WriteImageFloat(const std::filesystem::path& path, const cv::Mat& image, int jpeg_quality = 95);
 
@@ -56,10 +77,13 @@ class ImageFolderSource : public FrameSource {
   bool Next(Frame* frame) override;
   Frame Read(int index) override;
   const std::vector<std::string>& names() const { return names_; }
+  // Frame k must be sizes[k] (its camera's size): checked from the header, before decoding.
+  void ExpectSizes(std::vector<cv::Size> sizes) { sizes_ = std::move(sizes); }
 
  private:
   std::filesystem::path folder_;
   std::vector<std::string> names_;
+  std::vector<cv::Size> sizes_;
   int next_ = 0;
 };
 

@@ -327,6 +327,25 @@ TEST(DatasetBadInput, ImageSizeDisagreesWithCamera) {
   ExpectInputError([&] { frames->Read(2); }, {s.names[2], "60x48", "64x48"});
 }
 
+// One frame's PNG header says 20000x20000 (decoding it took 6.8 GB): refused
+// from the header, against its camera, naming the file.
+TEST(DatasetBadInput, HugeFrameRefusedFromItsHeader) {
+  TempDir tmp;
+  const Synthetic s = MakeSynthetic(3, SmallPinhole());
+  WriteImages(s, tmp.path() / "images");
+  // Signature and IHDR (20000 x 20000, 8-bit RGB); the rest is never read.
+  const std::string ihdr("\x00\x00\x00\x0dIHDR\x00\x00\x4e\x20\x00\x00\x4e\x20\x08\x02\x00\x00\x00", 21);
+  std::ofstream(tmp.path() / "images" / s.names[1], std::ios::binary)
+      << std::string("\x89PNG\r\n\x1a\n", 8) << ihdr << "\x00\x00\x00\x00 IDAT never decoded";
+  WriteColmapModelText(s.model, tmp.path() / "sparse");
+  DatasetOptions options;
+  options.dataset_dir = tmp.path();
+  auto frames = Dataset::Open(options).OpenFrames();
+  Frame frame;
+  ASSERT_TRUE(frames->Next(&frame));
+  ExpectInputError([&] { frames->Next(&frame); }, {s.names[1], "header", "20000x20000", "64x48"});
+}
+
 TEST(DatasetBadInput, CorruptFrameNamesTheFile) {
   TempDir tmp;
   const Synthetic s = MakeSynthetic(3, SmallPinhole());

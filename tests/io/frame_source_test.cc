@@ -2,8 +2,12 @@
 
 #include <gtest/gtest.h>
 #include <unistd.h>
+#include <zlib.h>
 
+#include <cstdint>
+#include <cstdio>
 #include <fstream>
+#include <iterator>
 #include <functional>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/videoio.hpp>
@@ -141,6 +145,121 @@ TEST(FrameSource, VideoSequentialAndSeek) {
   ExpectInputError([&] { VideoSource s(tmp.path() / "none.mp4"); }, {"none.mp4", "does not exist"});
   std::ofstream(tmp.path() / "junk.mp4", std::ios::binary) << std::string(1000, 'x');
   ExpectInputError([&] { VideoSource s(tmp.path() / "junk.mp4"); }, {"junk.mp4"});
+}
+
+// ---- image headers, checked before decoding ---------------------------------
+
+// A valid PNG of `width` x `height` 1-bit grey pixels, all black (deflate makes
+// it small however large it is): big images without big files.
+std::string BlackPng(std::uint32_t width, std::uint32_t height) {
+  auto be32 = [](std::uint32_t v) {
+    return std::string{static_cast<char>(v >> 24), static_cast<char>(v >> 16), static_cast<char>(v >> 8),
+                       static_cast<char>(v)};
+  };
+  auto chunk = [&](const std::string& type, const std::string& data) {
+    const std::string body = type + data;
+    const auto crc = static_cast<std::uint32_t>(
+        ::crc32(0, reinterpret_cast<const Bytef*>(body.data()), static_cast<uInt>(body.size())));
+    return be32(static_cast<std::uint32_t>(data.size())) + body + be32(crc);
+  };
+  const std::string ihdr = be32(width) + be32(height) + std::string("\x01\x00\x00\x00\x00", 5);  // 1 bit, grey
+  const std::string raw(static_cast<std::size_t>(height) * (1 + (width + 7) / 8), '\0');  // filter 0, zeros
+  uLongf size = ::compressBound(raw.size());
+  std::string z(size, '\0');
+  EXPECT_EQ(::compress(reinterpret_cast<Bytef*>(z.data()), &size, reinterpret_cast<const Bytef*>(raw.data()),
+                       raw.size()),
+            Z_OK);
+  z.resize(size);
+  return std::string("\x89PNG\r\n\x1a\n", 8) + chunk("IHDR", ihdr) + chunk("IDAT", z) + chunk("IEND", "");
+}
+
+std::string FileBytes(const fs::path& p) {
+  std::ifstream in(p, std::ios::binary);
+  return std::string((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+}
+
+// Peak RSS (VmHWM) in bytes since the last ResetPeakRss(); -1 where Linux cannot reset it.
+bool ResetPeakRss() { return static_cast<bool>(std::ofstream("/proc/self/clear_refs") << "5"); }
+long PeakRssBytes() {
+  std::ifstream in("/proc/self/status");
+  std::string line;
+  while (std::getline(in, line))
+    if (line.rfind("VmHWM:", 0) == 0) return std::stol(line.substr(6)) * 1024;
+  return -1;
+}
+
+TEST(ImageHeader, PngAndJpegSizesWithoutDecoding) {
+  TempDir tmp;
+  const cv::Mat image = Pattern(3, 37, 53);
+  cv::imwrite((tmp.path() / "a.png").string(), image);
+  cv::imwrite((tmp.path() / "a.jpg").string(), image);
+  cv::imwrite((tmp.path() / "p.jpg").string(), image, {cv::IMWRITE_JPEG_PROGRESSIVE, 1});
+  for (const char* name : {"a.png", "a.jpg", "p.jpg"}) {
+    SCOPED_TRACE(name);
+    const auto h = ReadImageHeader(FileBytes(tmp.path() / name));
+    ASSERT_TRUE(h.has_value());
+    EXPECT_EQ(h->width, 53);
+    EXPECT_EQ(h->height, 37);
+    EXPECT_TRUE(h->complete);
+    EXPECT_EQ(ReadImageFloat(tmp.path() / name, cv::Size(53, 37)).size(), cv::Size(53, 37));
+  }
+  EXPECT_EQ(ReadImageHeader(BlackPng(20000, 20000))->width, 20000);
+  EXPECT_FALSE(ReadImageHeader("BM not a png or jpeg").has_value());
+  EXPECT_FALSE(ReadImageHeader("").has_value());
+}
+
+// A JPEG cut in half decodes "successfully" (libjpeg warns and fills grey): refused, naming the file.
+TEST(ImageHeader, TruncatedJpegIsAnErrorNamingTheFile) {
+  TempDir tmp;
+  const fs::path full = tmp.path() / "full.jpg", half = tmp.path() / "half.jpg";
+  for (bool progressive : {false, true}) {
+    SCOPED_TRACE(progressive);
+    cv::Mat noise(120, 160, CV_8UC3);
+    cv::randu(noise, 0, 255);  // no long runs: the entropy-coded data fills most of the file
+    cv::imwrite(full.string(), noise, {cv::IMWRITE_JPEG_PROGRESSIVE, progressive ? 1 : 0});
+    const std::string bytes = FileBytes(full);
+    std::ofstream(half, std::ios::binary) << bytes.substr(0, bytes.size() / 2);
+    EXPECT_FALSE(ReadImageHeader(bytes.substr(0, bytes.size() / 2))->complete);
+    ExpectInputError([&] { ReadImageFloat(half); }, {"half.jpg", "truncated"});
+    ImageFolderSource source(tmp.path(), {"full.jpg", "half.jpg"});
+    Frame frame;
+    ASSERT_TRUE(source.Next(&frame));
+    ExpectInputError([&] { source.Next(&frame); }, {"half.jpg", "truncated"});
+    // All but the last byte (EOI's 0xD9): still truncated. Data after EOI is allowed.
+    std::ofstream(half, std::ios::binary) << bytes.substr(0, bytes.size() - 1);
+    ExpectInputError([&] { ReadImageFloat(half); }, {"half.jpg", "truncated"});
+    std::ofstream(half, std::ios::binary) << bytes << "trailing bytes after EOI";
+    EXPECT_EQ(ReadImageFloat(half).size(), cv::Size(160, 120));
+  }
+}
+
+// A 4000x4000 frame among 64x48 ones is refused from its header, before any
+// pixel is decoded (decoding it took ~260 MB: 16 MB grey, 192 MB float BGR).
+TEST(ImageHeader, FrameLargerThanItsCameraIsRefusedBeforeDecoding) {
+  TempDir tmp;
+  cv::imwrite((tmp.path() / "a.png").string(), Pattern(0, 48, 64));
+  std::ofstream(tmp.path() / "big.png", std::ios::binary) << BlackPng(4000, 4000);
+  ImageFolderSource source(tmp.path(), {"a.png", "big.png"});
+  source.ExpectSizes({cv::Size(64, 48), cv::Size(64, 48)});
+  Frame frame;
+  ASSERT_TRUE(source.Next(&frame));
+  const bool measured = ResetPeakRss();
+  const long before = PeakRssBytes();
+  ExpectInputError([&] { source.Next(&frame); }, {"big.png", "4000x4000", "64x48"});
+  if (measured && before > 0) {
+    const long grew = PeakRssBytes() - before;
+    std::printf("peak RSS grew by %.1f MB while refusing the 4000x4000 frame\n", grew / 1e6);
+    EXPECT_LT(grew, 8l << 20);
+  }
+  // Without a camera to compare with, the pixel cap still holds (the IDAT need not even be valid).
+  std::string huge = BlackPng(20000, 20000);
+  std::ofstream(tmp.path() / "huge.png", std::ios::binary) << huge;
+  ExpectInputError([&] { ReadImageFloat(tmp.path() / "huge.png"); }, {"huge.png", "20000x20000", "pixels"});
+  // Under the cap and without a camera it is decoded, and the measure sees that.
+  const bool remeasured = ResetPeakRss();
+  const long before_decode = PeakRssBytes();
+  EXPECT_EQ(ReadImageFloat(tmp.path() / "big.png").size(), cv::Size(4000, 4000));
+  if (remeasured && before_decode > 0) EXPECT_GT(PeakRssBytes() - before_decode, 100l << 20);
 }
 
 }  // namespace
