@@ -10,6 +10,14 @@ namespace lfrecon {
 void FusionOptions::Check() const {
   if (!volume.IsValid()) throw OptionError("fusion: the volume V must be a non-empty box");
   LFRECON_CHECK_OPTION(std::isfinite(voxel_size) && voxel_size > 0);
+  CheckModel();
+  const Eigen::Vector3d n = volume.Extent() / voxel_size;
+  if (n.maxCoeff() > (1 << 20))
+    throw OptionError("fusion: V is " + std::to_string(n.maxCoeff()) +
+                      " voxels across at this voxel size (at most 1048576 per axis)");
+}
+
+void FusionOptions::CheckModel() const {
   LFRECON_CHECK_OPTION(std::isfinite(sigma_v) && sigma_v > 0);
   LFRECON_CHECK_OPTION(std::isfinite(sigma_s) && sigma_s > 0);
   // P(c = -1) = 1 / (1 + exp(2 / σ_s^2)) must fall below the threshold, or nothing is ever carved.
@@ -25,10 +33,6 @@ void FusionOptions::Check() const {
   LFRECON_CHECK_OPTION(prune_every >= 0);
   LFRECON_CHECK_OPTION(prune_below > 0 && prune_below <= surface_threshold);
   LFRECON_CHECK_OPTION(store_max_block >= 1 && store_max_block <= 1024 && (store_max_block & (store_max_block - 1)) == 0);
-  const Eigen::Vector3d n = volume.Extent() / voxel_size;
-  if (n.maxCoeff() > (1 << 20))
-    throw OptionError("fusion: V is " + std::to_string(n.maxCoeff()) +
-                      " voxels across at this voxel size (at most 1048576 per axis)");
 }
 
 Eigen::Vector3i FusionOptions::GridSize() const {

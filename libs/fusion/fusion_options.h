@@ -91,6 +91,9 @@ struct FusionOptions {
 
   // Throws OptionError.
   void Check() const;
+  // Check() without `volume` and `voxel_size` (options known before the data
+  // is: the job or command line options).
+  void CheckModel() const;
 
   double SigmaV() const { return sigma_v * voxel_size; }  // metres
   double BandHalfWidth() const { return band * SigmaV(); }  // metres

@@ -26,7 +26,7 @@ namespace fs = std::filesystem;
 void PipelineOptions::Check() const {
   depth.Check();
   if (densify) propagation.Check();
-  if (voxel_size < 0) throw OptionError("voxel size must be positive");
+  if (!(voxel_size >= 0) || !std::isfinite(voxel_size)) throw OptionError("voxel size must be positive");
   if (voxel_size == 0 && voxel_divisions < 1) throw OptionError("voxel_divisions must be >= 1");
   meshing.Check();
   coloring.Check();
@@ -34,6 +34,10 @@ void PipelineOptions::Check() const {
   if (refine) refine_options.Check();
   if (carving_views < 0) throw OptionError("carving_views must be >= 0");
   if (!(dense_sigma_s > 0)) throw OptionError("dense_sigma_s must be positive");
+  // The fusion as Run() sets it up (σ_s of dense maps), but for V and the voxel size.
+  FusionOptions fo = fusion;
+  if (densify) fo.sigma_s = dense_sigma_s;
+  fo.CheckModel();
   if (!(background_confidence_floor >= 0 && background_confidence_floor <= 1))
     throw OptionError("background_confidence_floor must be in [0, 1]");
 }

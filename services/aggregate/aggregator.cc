@@ -94,12 +94,7 @@ namespace {
 
 // The job's fusion grid, empty: V, voxel and σ_s as the embedded pipeline sets them.
 std::unique_ptr<ProbabilisticFusion> NewFusion(const JobGeometry& geo) {
-  const PipelineOptions& po = geo.options;
-  FusionOptions fo = po.fusion;
-  fo.volume = geo.volume;
-  fo.voxel_size = PipelineVoxelSize(geo.volume, po);
-  if (po.densify) fo.sigma_s = po.dense_sigma_s;
-  return std::make_unique<ProbabilisticFusion>(fo);
+  return std::make_unique<ProbabilisticFusion>(JobFusionOptions(geo.options, geo.volume));
 }
 
 // `k` of `n` views evenly spread, as the embedded pipeline picks its colour and

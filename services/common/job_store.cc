@@ -270,10 +270,19 @@ PipelineOptions JobPipelineOptions(const pb::JobOptions& o) {
   options.voxel_size = o.voxel_size();
   options.densify = !o.no_densify();
   if (o.has_color_views()) options.color_views = o.color_views();
-  if (o.sigma_s() < 0) throw OptionError("sigma_s must be positive");
+  if (!(o.sigma_s() >= 0) || !std::isfinite(o.sigma_s())) throw OptionError("sigma_s must be positive");
   if (o.sigma_s() > 0) (options.densify ? options.dense_sigma_s : options.fusion.sigma_s) = o.sigma_s();
   options.Check();
   return options;
+}
+
+FusionOptions JobFusionOptions(const PipelineOptions& po, const BoundingBox& volume) {
+  FusionOptions fo = po.fusion;
+  fo.volume = volume;
+  fo.voxel_size = PipelineVoxelSize(volume, po);
+  if (po.densify) fo.sigma_s = po.dense_sigma_s;
+  fo.Check();
+  return fo;
 }
 
 pb::JobManifest MakeManifest(const std::string& id, const pb::JobSpec& spec, const Dataset& ds) {
@@ -318,6 +327,7 @@ JobGeometry LoadJobGeometry(const JobStore& store, const std::string& id) {
   if (g.views.empty()) throw InputError(what, "views", "no views");
   g.volume = BoxFromProto(m.volume(), what);
   g.options = JobPipelineOptions(m.spec().options());
+  JobFusionOptions(g.options, g.volume);  // validated with V, as the aggregator sets up the grid
   return g;
 }
 

@@ -82,7 +82,11 @@ DepthMap DepthMapFromProto(const pb::DepthMap& map, int width, int height, const
 
 // The embedded pipeline's options for a job: PipelineOptions defaults with the
 // job's overrides, exactly as `lfrecon run` maps its flags.
+// Every job option is validated here (PipelineOptions::Check, throws OptionError):
+// ingest refuses a job whose options would fail later.
 PipelineOptions JobPipelineOptions(const pb::JobOptions& options);
+// The job's fusion grid options for V, as the embedded pipeline sets them up; throws OptionError.
+FusionOptions JobFusionOptions(const PipelineOptions& options, const BoundingBox& volume);
 
 // The manifest of job `id` for `spec` opened as `dataset` (what ingest writes).
 pb::JobManifest MakeManifest(const std::string& id, const pb::JobSpec& spec, const Dataset& dataset);

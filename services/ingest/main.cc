@@ -100,7 +100,8 @@ int Serve(const IngestOptions& o) {
       const pb::JobSpec& spec = in->envelope.submit().spec();
       try {
         auto ds = std::make_shared<Dataset>(Dataset::Open(ToDatasetOptions(spec)));
-        JobPipelineOptions(spec.options());  // validates the options before accepting the job
+        // Every option validated (with V) before the job is accepted.
+        JobFusionOptions(JobPipelineOptions(spec.options()), ds->bbox());
         const std::string id = store.CreateJob();
         store.WriteManifest(MakeManifest(id, spec, *ds));
         pb::Envelope created = NewEnvelope(id);

@@ -9,6 +9,7 @@
 #include <thread>
 
 #include "commands.h"
+#include "common/job_store.h"
 #include "common/messaging.h"
 #include "dataset_flags.h"
 #include "util/error.h"
@@ -140,6 +141,7 @@ void AddServiceCommands(CLI::App& root, int* exit_code) {
       spec->mutable_options()->set_sigma_s(a->sigma_s);
       spec->mutable_options()->set_no_densify(a->no_densify);
       spec->mutable_options()->set_color_views(a->color_views);
+      svc::JobPipelineOptions(spec->options());  // every job option checked here, as lfrecon run does (exit 2)
       const pb::Envelope reply = Call(a->ep.ingest, req, a->ep.timeout_ms);
       const std::string job = reply.submit_reply().job_id();
       std::cout << job << "\n" << std::flush;

@@ -97,4 +97,30 @@ TEST(LfreconCli, SynthUnknownSceneIsUsageError) {
   fs::remove_all(dir);
 }
 
+// σ_s so large that a free-space vote never carves (FusionOptions::Check):
+// `lfrecon run` refuses it, and `lfrecon submit` must too, before anything is
+// sent (it used to print a job id; the job then answered ERROR_INTERNAL for ever).
+TEST(LfreconCli, SubmitRefusesInvalidJobOptionsAsRunDoes) {
+  const fs::path dir = TempDir("submit_opts");
+  Result r = RunCli("-q synth --out " + (dir / "ds").string() + " --frames 12 --width 64 --height 36");
+  ASSERT_EQ(r.code, 0) << r.output;
+  const std::string data = " --dataset " + (dir / "ds").string();
+  r = RunCli("run" + data + " --sigma-s 2 --out " + (dir / "run").string());
+  EXPECT_EQ(r.code, 2) << r.output;
+  EXPECT_NE(r.output.find("sigma_s"), std::string::npos) << r.output;
+  // No daemon listens there: a refusal must come from the option check, at once.
+  const std::string nowhere = " --timeout-ms 300 --ingest ipc://" + (dir / "no_ingest.sock").string();
+  for (const char* flags : {" --sigma-s 2", " --sigma-s 2 --no-densify", " --color-views -1"}) {
+    r = RunCli("submit" + data + flags + nowhere);
+    EXPECT_EQ(r.code, 2) << flags << ": " << r.output;
+    EXPECT_NE(r.output.find(std::string(flags).find("color") != std::string::npos ? "color_views" : "sigma_s"),
+              std::string::npos)
+        << r.output;
+  }
+  // Valid options get as far as the (absent) daemon: exit 1, not 2.
+  r = RunCli("submit" + data + " --sigma-s 0.3" + nowhere);
+  EXPECT_EQ(r.code, 1) << r.output;
+  fs::remove_all(dir);
+}
+
 }  // namespace
