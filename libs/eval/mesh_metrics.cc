@@ -3,11 +3,14 @@
 #include <Eigen/Geometry>
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
+#include <tbb/parallel_reduce.h>
 
 #include <algorithm>
 #include <array>
 #include <cmath>
 #include <limits>
+#include <stdexcept>
+#include <string>
 
 #include "util/error.h"
 
@@ -63,11 +66,88 @@ double Median(std::vector<double> v) {
 
 }  // namespace
 
+void ObservationOptions::Check() const {
+  LFRECON_CHECK_OPTION(support_px >= 1 && support_px <= 15);
+  LFRECON_CHECK_OPTION(std::isfinite(tolerance) && tolerance >= 0);
+  LFRECON_CHECK_OPTION(std::isfinite(relative_tolerance) && relative_tolerance >= 0);
+}
+
+ObservationMask::ObservationMask(const std::vector<Eigen::Vector3d>* points, const ObservationOptions& options)
+    : points_(points), options_(options), observed_(points->size(), 0) {
+  options_.Check();
+}
+
+void ObservationMask::Add(const PinholeView& view, const cv::Mat& depth) {
+  if (depth.empty() || depth.channels() != 1 || (depth.depth() != CV_32F && depth.depth() != CV_64F))
+    throw std::invalid_argument("observation mask: the depth map must be one float channel");
+  if (depth.cols != view.width || depth.rows != view.height)
+    throw std::invalid_argument("observation mask: the depth map is " + std::to_string(depth.cols) + "x" +
+                                std::to_string(depth.rows) + " but its view is " + std::to_string(view.width) +
+                                "x" + std::to_string(view.height));
+  cv::Mat d32;
+  if (depth.depth() == CV_32F)
+    d32 = depth;
+  else
+    depth.convertTo(d32, CV_32F);
+  const cv::Mat d = d32;
+  const int n = options_.support_px;
+  const double half = 0.5 * (n - 1);
+  const double tol = options_.tolerance, rel = options_.relative_tolerance;
+  const std::vector<Eigen::Vector3d>& pts = *points_;
+  const std::size_t added = tbb::parallel_reduce(
+      tbb::blocked_range<std::size_t>(0, pts.size(), 1024), std::size_t{0},
+      [&](const tbb::blocked_range<std::size_t>& r, std::size_t count) {
+        for (std::size_t i = r.begin(); i < r.end(); ++i) {
+          if (observed_[i]) continue;
+          Eigen::Vector2d px;
+          const double z = view.Project(pts[i], &px);
+          if (!(z > 0) || !view.InImage(px)) continue;
+          // The n x n pixel centres (c + 0.5, r + 0.5) nearest to px.
+          const int c0 = std::max(0, static_cast<int>(std::floor(px.x() - half)));
+          const int r0 = std::max(0, static_cast<int>(std::floor(px.y() - half)));
+          const int c1 = std::min(d.cols, static_cast<int>(std::floor(px.x() - half)) + n);
+          const int r1 = std::min(d.rows, static_cast<int>(std::floor(px.y() - half)) + n);
+          double dmax = -std::numeric_limits<double>::infinity();
+          for (int y = r0; y < r1 && dmax < std::numeric_limits<double>::infinity(); ++y) {
+            const float* row = d.ptr<float>(y);
+            for (int x = c0; x < c1; ++x) {
+              const float v = row[x];
+              if (!(v > 0) || !std::isfinite(v)) {  // no surface there: nothing occludes
+                dmax = std::numeric_limits<double>::infinity();
+                break;
+              }
+              dmax = std::max(dmax, static_cast<double>(v));
+            }
+          }
+          if (z <= dmax + std::max(tol, rel * z)) {
+            observed_[i] = 1;
+            ++count;
+          }
+        }
+        return count;
+      },
+      [](std::size_t a, std::size_t b) { return a + b; });
+  num_observed_ += added;
+  ++num_views_;
+}
+
+std::vector<std::uint8_t> ObservedMask(const std::vector<Eigen::Vector3d>& points, const GroundTruthViews& gt,
+                                       const ObservationOptions& options) {
+  ObservationMask mask(&points, options);
+  for (int k = 0; k < static_cast<int>(gt.views.size()); ++k) {
+    if (mask.NumObserved() == points.size()) break;  // nothing left to see
+    const cv::Mat depth = gt.load(k);
+    mask.Add(gt.views[static_cast<std::size_t>(k)], depth);
+  }
+  return mask.observed();
+}
+
 void MeshMetricsOptions::Check() const {
   if (thresholds.empty()) throw OptionError("mesh metrics: at least one threshold is needed");
   for (double t : thresholds) LFRECON_CHECK_OPTION(std::isfinite(t) && t > 0);
   LFRECON_CHECK_OPTION(std::isfinite(sample_spacing) && sample_spacing > 0);
   if (volume && !volume->IsValid()) throw OptionError("mesh metrics: the volume V must be a non-empty box");
+  observation.Check();
 }
 
 const ThresholdScore* MeshMetrics::Find(double threshold) const {
@@ -167,7 +247,8 @@ std::vector<double> SurfaceDistance::Distances(const std::vector<Eigen::Vector3d
 }
 
 MeshMetrics EvaluateMesh(const TriangleMesh& predicted, const TriangleMesh& ground_truth,
-                         const TriangleMesh* ground_truth_thin, const MeshMetricsOptions& options) {
+                         const TriangleMesh* ground_truth_thin, const MeshMetricsOptions& options,
+                         const GroundTruthViews* views) {
   options.Check();
   const double max_t = *std::max_element(options.thresholds.begin(), options.thresholds.end());
   const BoundingBox* volume = options.volume ? &*options.volume : nullptr;
@@ -188,6 +269,26 @@ MeshMetrics EvaluateMesh(const TriangleMesh& predicted, const TriangleMesh& grou
   m.predicted_samples = pred.size();
   m.gt_samples = gt.size();
   m.thin_samples = thin.size();
+  // Observation masks of the ground-truth and thin samples, in one pass over the depth maps.
+  std::vector<std::uint8_t> gt_seen, thin_seen;
+  if (views) {
+    std::vector<Eigen::Vector3d> all;
+    all.reserve(gt.size() + thin.size());
+    all.insert(all.end(), gt.begin(), gt.end());
+    all.insert(all.end(), thin.begin(), thin.end());
+    ObservationMask mask(&all, options.observation);
+    for (int k = 0; k < static_cast<int>(views->views.size()); ++k) {
+      if (mask.NumObserved() == all.size()) break;
+      mask.Add(views->views[static_cast<std::size_t>(k)], views->load(k));
+    }
+    const std::vector<std::uint8_t>& seen = mask.observed();
+    gt_seen.assign(seen.begin(), seen.begin() + static_cast<std::ptrdiff_t>(gt.size()));
+    thin_seen.assign(seen.begin() + static_cast<std::ptrdiff_t>(gt.size()), seen.end());
+    m.has_observation = true;
+    m.observation_views = static_cast<int>(views->views.size());
+    m.gt_observed_samples = static_cast<std::size_t>(std::count(gt_seen.begin(), gt_seen.end(), 1));
+    m.thin_observed_samples = static_cast<std::size_t>(std::count(thin_seen.begin(), thin_seen.end(), 1));
+  }
 
   const SurfaceDistance to_gt(ground_truth, max_t);
   const SurfaceDistance to_pred(predicted, max_t, volume);
@@ -198,13 +299,28 @@ MeshMetrics EvaluateMesh(const TriangleMesh& predicted, const TriangleMesh& grou
     if (d.empty()) return 0.0;
     return static_cast<double>(std::count_if(d.begin(), d.end(), [t](double x) { return x <= t; })) / d.size();
   };
+  auto masked_share = [](const std::vector<double>& d, const std::vector<std::uint8_t>& seen, double t) {
+    std::size_t n = 0, in = 0;
+    for (std::size_t i = 0; i < d.size(); ++i)
+      if (seen[i]) {
+        ++n;
+        in += d[i] <= t;
+      }
+    return n ? static_cast<double>(in) / n : 0.0;
+  };
+  auto f = [](double p, double r) { return p + r > 0 ? 2 * p * r / (p + r) : 0.0; };
   for (double t : options.thresholds) {
     ThresholdScore s;
     s.threshold = t;
     s.precision = share(acc, t);
     s.recall = share(comp, t);
-    s.fscore = s.precision + s.recall > 0 ? 2 * s.precision * s.recall / (s.precision + s.recall) : 0.0;
+    s.fscore = f(s.precision, s.recall);
     if (ground_truth_thin) s.thin_recall = share(thin_comp, t);
+    if (views) {
+      s.recall_observed = masked_share(comp, gt_seen, t);
+      s.fscore_observed = f(s.precision, s.recall_observed);
+      if (ground_truth_thin) s.thin_recall_observed = masked_share(thin_comp, thin_seen, t);
+    }
     m.scores.push_back(s);
   }
   auto capped = [max_t](std::vector<double> d) {
@@ -213,6 +329,13 @@ MeshMetrics EvaluateMesh(const TriangleMesh& predicted, const TriangleMesh& grou
   };
   m.median_accuracy = Median(capped(acc));
   m.median_completeness = Median(capped(comp));
+  if (views) {
+    std::vector<double> seen_comp;
+    seen_comp.reserve(m.gt_observed_samples);
+    for (std::size_t i = 0; i < comp.size(); ++i)
+      if (gt_seen[i]) seen_comp.push_back(comp[i]);
+    m.median_completeness_observed = Median(capped(std::move(seen_comp)));
+  }
   return m;
 }
 

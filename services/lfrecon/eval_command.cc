@@ -1,9 +1,12 @@
 // `lfrecon eval`: precision, recall and F-score of a reconstructed mesh against
-// a dataset's ground truth (BRIEF §4), plus recall on the thin parts.
+// a dataset's ground truth (BRIEF §4), plus recall on the thin parts; recall
+// and F both over all ground truth and over the part that some ground-truth
+// depth map (depth/depth_NNNN.exr) observes.
 #include <spdlog/spdlog.h>
 
 #include <algorithm>
 #include <cstdio>
+#include <fstream>
 #include <iostream>
 #include <memory>
 #include <nlohmann/json.hpp>
@@ -14,6 +17,7 @@
 #include "dataset_flags.h"
 #include "eval/mesh_metrics.h"
 #include "io/dataset.h"
+#include "io/depth_map_io.h"
 #include "io/ply.h"
 #include "util/error.h"
 #include "util/progress.h"
@@ -30,8 +34,66 @@ struct EvalFlags {
   double spacing_mm = 1.0;
   std::uint64_t seed = 1;
   bool no_volume = false;
+  bool no_observation = false;
+  ObservationOptions observation;
+  double observation_tolerance_mm = 2.0;
   bool json = false;
 };
+
+// The poses the ground-truth depth maps were rendered from, when scene.json
+// keeps them apart from the given (perturbed) ones: `lfrecon synth
+// --pose-rot-deg/--pose-trans-mm` writes true_cam_from_world_qwxyz_t. Empty
+// when absent or not one per view.
+std::vector<Rigid3d> TruePoses(const Dataset& ds) {
+  std::vector<Rigid3d> poses;
+  if (ds.root().empty()) return poses;
+  const auto path = ds.root() / "scene.json";
+  std::ifstream in(path);
+  if (!in) return poses;
+  const nlohmann::json j = nlohmann::json::parse(in, nullptr, /*allow_exceptions=*/false);
+  if (!j.is_object() || !j.contains("true_cam_from_world_qwxyz_t")) return poses;
+  const nlohmann::json& a = j["true_cam_from_world_qwxyz_t"];
+  if (!a.is_array() || static_cast<int>(a.size()) != ds.NumViews())
+    throw InputError(path.string(), "true_cam_from_world_qwxyz_t", "needs one pose per view");
+  for (const nlohmann::json& e : a) {
+    if (!e.is_array() || e.size() != 7)
+      throw InputError(path.string(), "true_cam_from_world_qwxyz_t", "each pose is [qw, qx, qy, qz, tx, ty, tz]");
+    for (const nlohmann::json& v : e)
+      if (!v.is_number())
+        throw InputError(path.string(), "true_cam_from_world_qwxyz_t", "each pose is [qw, qx, qy, qz, tx, ty, tz]");
+    Eigen::Quaterniond q(e[0].get<double>(), e[1].get<double>(), e[2].get<double>(), e[3].get<double>());
+    if (!(q.norm() > 0.5)) throw InputError(path.string(), "true_cam_from_world_qwxyz_t", "quaternion is not unit");
+    poses.emplace_back(q.normalized(), Eigen::Vector3d(e[4].get<double>(), e[5].get<double>(), e[6].get<double>()));
+  }
+  return poses;
+}
+
+// The dataset's views with a ground-truth depth map; each map is read when the mask needs it.
+GroundTruthViews DepthMapViews(const Dataset& ds) {
+  GroundTruthViews gt;
+  auto paths = std::make_shared<std::vector<std::string>>();
+  const std::vector<Rigid3d> true_poses = TruePoses(ds);
+  for (int i = 0; i < ds.NumViews(); ++i) {
+    const auto p = ds.GroundTruthDepthPath(i);
+    if (!p) continue;
+    gt.views.push_back(true_poses.empty() ? ds.View(i)
+                                          : PinholeView(ds.UndistortedCamera(i), true_poses[static_cast<std::size_t>(i)]));
+    paths->push_back(p->string());
+  }
+  if (!true_poses.empty() && !gt.views.empty())
+    spdlog::info("observation mask: depth maps placed at scene.json's true poses (the given ones carry pose error)");
+  const std::vector<PinholeView> views = gt.views;
+  gt.load = [paths, views](int k) {
+    const std::string& path = (*paths)[static_cast<std::size_t>(k)];
+    cv::Mat d = ReadDepthMap(path);
+    const PinholeView& v = views[static_cast<std::size_t>(k)];
+    if (d.cols != v.width || d.rows != v.height)
+      throw InputError(path, "depth map is " + std::to_string(d.cols) + "x" + std::to_string(d.rows) +
+                                 " but its view is " + std::to_string(v.width) + "x" + std::to_string(v.height));
+    return d;
+  };
+  return gt;
+}
 
 TriangleMesh ReadMesh(const std::string& path, const std::string& what) {
   TriangleMesh m = ReadPly(path);
@@ -62,6 +124,8 @@ int RunEval(const EvalFlags& flags) {
   options.sample_spacing = flags.spacing_mm / 1000.0;
   options.seed = flags.seed;
   if (!flags.no_volume) options.volume = ds.bbox();
+  options.observation = flags.observation;
+  options.observation.tolerance = flags.observation_tolerance_mm / 1000.0;
   options.Check();
 
   Timer timer;
@@ -75,8 +139,17 @@ int RunEval(const EvalFlags& flags) {
       thin_path.clear();
     }
   }
-  const MeshMetrics m = EvaluateMesh(mesh, gt, thin_path.empty() ? nullptr : &thin, options);
+  GroundTruthViews depth_views;
+  if (!flags.no_observation) depth_views = DepthMapViews(ds);
+  const bool masked = !depth_views.views.empty();
+  if (!flags.no_observation && !masked)
+    spdlog::info("{}: no ground-truth depth maps (depth/depth_NNNN.exr): only unmasked recall and F",
+                 ds.root().string());
+  const MeshMetrics m =
+      EvaluateMesh(mesh, gt, thin_path.empty() ? nullptr : &thin, options, masked ? &depth_views : nullptr);
   const double seconds = timer.Seconds();
+  const ObservationOptions& obs = options.observation;
+  auto null_if_negative = [](double x) { return x < 0 ? nlohmann::json() : nlohmann::json(x); };
 
   const BoundingBox& b = ds.bbox();
   if (flags.json) {
@@ -93,7 +166,20 @@ int RunEval(const EvalFlags& flags) {
     j["samples"] = {{"reconstructed_in_volume", m.predicted_samples},
                     {"reconstructed_outside_volume", m.predicted_samples_outside},
                     {"ground_truth", m.gt_samples},
-                    {"ground_truth_thin", m.thin_samples}};
+                    {"ground_truth_thin", m.thin_samples},
+                    {"ground_truth_observed", masked ? nlohmann::json(m.gt_observed_samples) : nlohmann::json()},
+                    {"ground_truth_thin_observed",
+                     masked && !thin_path.empty() ? nlohmann::json(m.thin_observed_samples) : nlohmann::json()}};
+    // Observation mask: null when the dataset has no ground-truth depth maps (or --no-observation).
+    j["observed_share"] = masked ? nlohmann::json(m.ObservedShare()) : nlohmann::json();
+    j["thin_observed_share"] = masked && !thin_path.empty() ? nlohmann::json(m.ThinObservedShare()) : nlohmann::json();
+    if (masked)
+      j["observation"] = {{"depth_maps", m.observation_views},
+                          {"support_px", obs.support_px},
+                          {"tolerance_mm", obs.tolerance * 1000.0},
+                          {"relative_tolerance", obs.relative_tolerance}};
+    else
+      j["observation"] = nlohmann::json();
     j["area_m2"] = {{"reconstructed", m.predicted_area}, {"ground_truth", m.gt_area}};
     nlohmann::json scores = nlohmann::json::array();
     for (const ThresholdScore& s : m.scores) {
@@ -101,12 +187,17 @@ int RunEval(const EvalFlags& flags) {
                           {"precision", s.precision},
                           {"recall", s.recall},
                           {"fscore", s.fscore}};
-      e["thin_recall"] = s.thin_recall < 0 ? nlohmann::json() : nlohmann::json(s.thin_recall);
+      e["thin_recall"] = null_if_negative(s.thin_recall);
+      e["recall_observed"] = null_if_negative(s.recall_observed);
+      e["fscore_observed"] = null_if_negative(s.fscore_observed);
+      e["thin_recall_observed"] = null_if_negative(s.thin_recall_observed);
       scores.push_back(e);
     }
     j["scores"] = scores;
     j["median_accuracy_mm"] = m.median_accuracy * 1000.0;
     j["median_completeness_mm"] = m.median_completeness * 1000.0;
+    j["median_completeness_observed_mm"] =
+        masked ? nlohmann::json(m.median_completeness_observed * 1000.0) : nlohmann::json();
     j["seconds"] = seconds;
     std::cout << j.dump(2) << "\n";
     return 0;
@@ -122,17 +213,42 @@ int RunEval(const EvalFlags& flags) {
   std::printf("samples       %zu reconstructed, %zu ground truth, %zu thin (one per %.2f mm^2, seed %llu)\n",
               m.predicted_samples, m.gt_samples, m.thin_samples, flags.spacing_mm * flags.spacing_mm,
               static_cast<unsigned long long>(flags.seed));
-  std::printf("%8s %10s %8s %8s %12s\n", "tau(mm)", "precision", "recall", "F-score", "thin recall");
-  for (const ThresholdScore& s : m.scores) {
-    if (s.thin_recall < 0)
-      std::printf("%8g %10.4f %8.4f %8.4f %12s\n", s.threshold * 1000, s.precision, s.recall, s.fscore, "-");
-    else
-      std::printf("%8g %10.4f %8.4f %8.4f %12.4f\n", s.threshold * 1000, s.precision, s.recall, s.fscore,
-                  s.thin_recall);
+  if (masked) {
+    std::printf("observed      %zu of %zu ground-truth samples (%.1f %%)", m.gt_observed_samples, m.gt_samples,
+                100.0 * m.ObservedShare());
+    if (!thin_path.empty())
+      std::printf(", %zu of %zu thin (%.1f %%)", m.thin_observed_samples, m.thin_samples,
+                  100.0 * m.ThinObservedShare());
+    std::printf(" seen by %d ground-truth depth maps (%dx%d px support, tolerance max(%g mm, %g %% of depth))\n",
+                m.observation_views, obs.support_px, obs.support_px, obs.tolerance * 1000,
+                obs.relative_tolerance * 100);
+  } else if (flags.no_observation) {
+    std::printf("observed      not computed (--no-observation): recall and F count all ground truth\n");
+  } else {
+    std::printf("observed      no ground-truth depth maps (depth/depth_NNNN.exr): recall and F count all ground "
+                "truth, seen or not\n");
   }
-  std::printf("median distance: reconstruction->truth %.3f mm, truth->reconstruction %.3f mm (capped at %g mm)\n",
-              m.median_accuracy * 1000, m.median_completeness * 1000,
-              *std::max_element(flags.thresholds_mm.begin(), flags.thresholds_mm.end()));
+  auto cell = [](double x) {  // "-" for a figure that does not apply (-1)
+    char b[32] = "-";
+    if (x >= 0) std::snprintf(b, sizeof(b), "%.4f", x);
+    return std::string(b);
+  };
+  if (masked)
+    std::printf("%8s %10s %8s %8s %12s | %12s %9s %10s\n", "tau(mm)", "precision", "recall", "F-score",
+                "thin recall", "recall(obs)", "F(obs)", "thin(obs)");
+  else
+    std::printf("%8s %10s %8s %8s %12s\n", "tau(mm)", "precision", "recall", "F-score", "thin recall");
+  for (const ThresholdScore& s : m.scores) {
+    std::printf("%8g %10.4f %8.4f %8.4f %12s", s.threshold * 1000, s.precision, s.recall, s.fscore,
+                cell(s.thin_recall).c_str());
+    if (masked)
+      std::printf(" | %12.4f %9.4f %10s", s.recall_observed, s.fscore_observed, cell(s.thin_recall_observed).c_str());
+    std::printf("\n");
+  }
+  std::printf("median distance: reconstruction->truth %.3f mm, truth->reconstruction %.3f mm", m.median_accuracy * 1000,
+              m.median_completeness * 1000);
+  if (masked) std::printf(" (observed truth %.3f mm)", m.median_completeness_observed * 1000);
+  std::printf(" (capped at %g mm)\n", *std::max_element(flags.thresholds_mm.begin(), flags.thresholds_mm.end()));
   spdlog::info("eval took {:.1f} s", seconds);
   return 0;
 }
@@ -152,6 +268,18 @@ void AddEvalCommand(CLI::App& root, int* exit_code) {
   cmd->add_option("--spacing-mm", flags->spacing_mm, "One surface sample per spacing^2 of area (default 1 mm)");
   cmd->add_option("--seed", flags->seed, "Sampling seed (default 1)");
   cmd->add_flag("--no-volume", flags->no_volume, "Do not restrict the reconstruction's samples to V");
+  cmd->add_flag("--no-observation", flags->no_observation,
+                "Do not mask the ground truth by what the ground-truth depth maps observe (unmasked figures only)");
+  cmd->add_option("--observation-support-px", flags->observation.support_px,
+                  "Observation mask: a ground-truth point is seen when its depth is at most the largest depth of the "
+                  "N x N pixels around its projection plus the tolerance")
+      ->capture_default_str();
+  cmd->add_option("--observation-tolerance-mm", flags->observation_tolerance_mm,
+                  "Observation mask: absolute depth tolerance in mm")
+      ->capture_default_str();
+  cmd->add_option("--observation-relative-tolerance", flags->observation.relative_tolerance,
+                  "Observation mask: depth tolerance as a share of the depth (the larger of the two applies)")
+      ->capture_default_str();
   cmd->add_flag("--json", flags->json, "Print the result as JSON on stdout");
   cmd->callback([flags, exit_code] { *exit_code = RunEval(*flags); });
 }
