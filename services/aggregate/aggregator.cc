@@ -704,7 +704,7 @@ pb::Envelope Aggregator::Handle(const pb::Envelope& req, Deferred* deferred) {
 
 void Aggregator::Serve() {
   zmq::context_t context(1);
-  RouterServer server(context, options_.endpoint, options_.max_message_bytes);
+  RouterServer server(context, options_.endpoint, options_.max_message_bytes, options_.security);
   spdlog::info("aggregate: serving on {} (store {}, lease {} ms)", options_.endpoint, store_.root().string(),
                options_.lease_ms);
   // Exports run off this thread, one at a time per lane (plain, refined), in

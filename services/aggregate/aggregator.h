@@ -54,6 +54,7 @@ struct AggregatorOptions {
   // Fault injection for the integration tests: each view's integration holds
   // the grid this much longer (slow fusion, as a big grid has). 0: off.
   int fusion_delay_ms = 0;
+  ServerSecurity security;  // CURVE key and allow-list, or plain (common/auth.h)
 };
 
 class Aggregator {

@@ -8,6 +8,7 @@
 
 #include "aggregator.h"
 #include "util/memory.h"
+#include "util/error.h"
 #include "util/logging.h"
 
 int main(int argc, char** argv) {
@@ -19,6 +20,8 @@ int main(int argc, char** argv) {
   std::string store;
   double max_mb = kDefaultMaxMessageBytes / 1048576.0;
   int verbosity = 0;
+  SecurityFlags security;
+  AddServerSecurityFlags(&app, &security);
   app.add_option("--bind", o.endpoint, "ZeroMQ endpoint to bind (default: $LFRECON_AGGREGATE or loopback)")->capture_default_str();
   app.add_option("--store", store, "Job store folder (shared with ingest and the workers)")->required();
   app.add_option("--max-message-mb", max_mb, "Largest message accepted or sent, MiB")->capture_default_str();
@@ -33,6 +36,17 @@ int main(int argc, char** argv) {
   if (o.lease_ms < 1 || o.max_message_bytes < 1024 || o.fusion_delay_ms < 0) {
     std::cerr << "lfrecon-aggregate: --lease-ms must be >= 1, --max-message-mb >= 0.001 and --fusion-delay-ms >= 0\n";
     return 2;
+  }
+  try {
+    o.security = ResolveServerSecurity(security);
+    // The endpoint check before the store is opened: a refused endpoint is a usage error.
+    CheckServerEndpoint(o.endpoint, o.security);
+  } catch (const lfrecon::OptionError& e) {
+    std::cerr << "lfrecon-aggregate: " << e.what() << "\n";
+    return 2;
+  } catch (const std::exception& e) {
+    std::cerr << "lfrecon-aggregate: error: " << e.what() << "\n";
+    return 1;
   }
   try {
     InstallStopHandlers();

@@ -86,8 +86,11 @@ void ConfigureSocket(zmq::socket_t& socket, std::int64_t max_message_bytes) {
   socket.set(zmq::sockopt::maxmsgsize, TransportLimit(max_message_bytes));
 }
 
-RequestClient::RequestClient(zmq::context_t& context, std::string endpoint, std::int64_t max_message_bytes)
-    : context_(context), endpoint_(std::move(endpoint)), max_message_bytes_(max_message_bytes) {
+RequestClient::RequestClient(zmq::context_t& context, std::string endpoint, std::int64_t max_message_bytes,
+                             ClientSecurity security)
+    : context_(context), endpoint_(std::move(endpoint)), max_message_bytes_(max_message_bytes),
+      security_(std::move(security)) {
+  CheckClientEndpoint(endpoint_, security_);
   Reset();
 }
 
@@ -95,6 +98,7 @@ void RequestClient::Reset() {
   socket_.reset();
   socket_.emplace(context_, zmq::socket_type::req);
   ConfigureSocket(*socket_, max_message_bytes_);
+  ApplyClientSecurity(*socket_, security_);
   socket_->connect(endpoint_);
 }
 
@@ -139,10 +143,21 @@ pb::Envelope RequestClient::Call(const pb::Envelope& request, std::chrono::milli
   return *reply;
 }
 
-RouterServer::RouterServer(zmq::context_t& context, const std::string& endpoint, std::int64_t max_message_bytes)
-    : max_message_bytes_(max_message_bytes), socket_(context, zmq::socket_type::router) {
+RouterServer::RouterServer(zmq::context_t& context, const std::string& endpoint, std::int64_t max_message_bytes,
+                           const ServerSecurity& security)
+    : max_message_bytes_(max_message_bytes), curve_(security.curve()), socket_(context, zmq::socket_type::router) {
+  CheckServerEndpoint(endpoint, security);
   ConfigureSocket(socket_, max_message_bytes);
+  if (curve_) {
+    zap_ = std::make_unique<ZapHandler>(context, security.allow);
+    ApplyServerSecurity(socket_, security);
+  }
   socket_.bind(endpoint);
+  if (curve_)
+    spdlog::info("{}: CURVE, {} allowed keys, public key {}", endpoint, security.allow->size(),
+                 security.key->public_key);
+  else if (security.insecure && endpoint.rfind("tcp://", 0) == 0)
+    spdlog::warn("{}: plain TCP (--insecure): anyone who reaches it can send anything, unencrypted", endpoint);
 }
 
 std::optional<RouterServer::Incoming> RouterServer::Receive(std::chrono::milliseconds timeout) {
@@ -163,7 +178,14 @@ std::optional<RouterServer::Incoming> RouterServer::Receive(std::chrono::millise
   frames.pop_back();
   in.route = std::move(frames);
   in.bytes = payload.size();
+  in.role = curve_ ? PeerRole(payload, &in.peer) : Role::kLocal;
   in.ok = DecodeEnvelope(payload.data(), payload.size(), max_message_bytes_, &in.envelope, &in.error);
+  if (in.ok && !RoleMaySend(in.role, in.envelope.body_case())) {
+    in.ok = false;
+    in.error.set_code(pb::ERROR_FORBIDDEN);
+    in.error.set_message(std::string("a ") + RoleName(in.role) + " key (" + (in.peer.empty() ? "?" : in.peer) +
+                         ") may not send '" + BodyName(in.envelope) + "'");
+  }
   return in;
 }
 

@@ -9,9 +9,13 @@
 //    unbounded. Every socket made here has both limits.
 //  * Anything that does not parse gets ERROR_MALFORMED. A daemon never dies
 //    of a message.
+//  * Security: CURVE with an allow-list and roles on network endpoints, ipc://
+//    only in private folders (auth.h); a message its sender's role may not
+//    send gets ERROR_FORBIDDEN.
 // Requests are REQ (client, "lazy pirate": on timeout the socket is rebuilt
 // and the request re-sent) -> ROUTER (daemon).
 #include <chrono>
+#include <memory>
 #include <cstdint>
 #include <optional>
 #include <stdexcept>
@@ -19,6 +23,7 @@
 #include <vector>
 #include <zmq.hpp>
 
+#include "common/auth.h"
 #include "lfrecon_service.pb.h"
 
 namespace lfrecon::svc {
@@ -63,8 +68,9 @@ void ConfigureSocket(zmq::socket_t& socket, std::int64_t max_message_bytes);
 // A REQ client with timeouts and reconnect ("lazy pirate").
 class RequestClient {
  public:
+  // Throws OptionError when the endpoint needs keys that `security` lacks (CheckClientEndpoint).
   RequestClient(zmq::context_t& context, std::string endpoint,
-                std::int64_t max_message_bytes = kDefaultMaxMessageBytes);
+                std::int64_t max_message_bytes = kDefaultMaxMessageBytes, ClientSecurity security = {});
   // Sends `request` and waits up to `timeout`; retries (rebuilding the socket)
   // up to `attempts` times. Returns nullopt when nothing answered. A reply that
   // is malformed, oversized or of another version becomes an ErrorReply envelope.
@@ -81,6 +87,7 @@ class RequestClient {
   zmq::context_t& context_;
   std::string endpoint_;
   std::int64_t max_message_bytes_;
+  ClientSecurity security_;
   std::optional<zmq::socket_t> socket_;
 };
 
@@ -93,16 +100,24 @@ class RouterServer {
     pb::Envelope envelope;
     pb::ErrorReply error;
     std::size_t bytes = 0;
+    Role role = Role::kNone;  // the sender's (kLocal on a socket without CURVE)
+    std::string peer;         // its key's name in the allow-list
   };
+  // With CURVE (security.key) it starts the context's ZAP handler before it
+  // binds: the context must have no other. Throws OptionError when the
+  // endpoint is not allowed under `security` (CheckServerEndpoint).
   RouterServer(zmq::context_t& context, const std::string& endpoint,
-               std::int64_t max_message_bytes = kDefaultMaxMessageBytes);
-  // Waits up to `timeout` for one request.
+               std::int64_t max_message_bytes = kDefaultMaxMessageBytes, const ServerSecurity& security = {});
+  // Waits up to `timeout` for one request. One that its sender's role may not
+  // send comes back with ok false and ERROR_FORBIDDEN.
   std::optional<Incoming> Receive(std::chrono::milliseconds timeout);
   void Reply(Incoming& in, const pb::Envelope& reply);
   zmq::socket_t& socket() { return socket_; }
 
  private:
   std::int64_t max_message_bytes_;
+  bool curve_ = false;
+  std::unique_ptr<ZapHandler> zap_;  // before socket_: destroyed after it
   zmq::socket_t socket_;
 };
 

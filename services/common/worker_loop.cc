@@ -8,6 +8,7 @@
 #include <set>
 #include <thread>
 
+#include "util/error.h"
 #include "util/logging.h"
 #include "util/memory.h"
 #include "util/progress.h"
@@ -64,7 +65,7 @@ int RunWorker(const WorkerOptions& o, pb::Stage stage, const std::string& name, 
   zmq::context_t context(1);
   JobStore store(o.store);
   StoreCache cache(store, o.cache_entries);
-  RequestClient client(context, o.aggregate, o.max_message_bytes);
+  RequestClient client(context, o.aggregate, o.max_message_bytes, o.security);
   char host[256] = "host";
   ::gethostname(host, sizeof(host) - 1);
   const std::string worker = name + "@" + host + ":" + std::to_string(::getpid());
@@ -142,6 +143,8 @@ int ParseWorkerFlags(int argc, char** argv, const std::string& description, Work
   std::string store;
   double max_mb = kDefaultMaxMessageBytes / 1048576.0;
   int verbosity = 0;
+  SecurityFlags security;
+  AddClientSecurityFlags(&app, &security, "--aggregate-key", "LFRECON_AGGREGATE_KEY");
   app.add_option("--aggregate", o->aggregate, "The aggregator's endpoint (default: $LFRECON_AGGREGATE or loopback)")
       ->capture_default_str();
   app.add_option("--store", store, "Job store folder")->required();
@@ -158,6 +161,16 @@ int ParseWorkerFlags(int argc, char** argv, const std::string& description, Work
     return code == 0 ? 0 : 2;
   }
   SetupLogging(verbosity);
+  try {
+    o->security = ResolveClientSecurity(security);
+    CheckClientEndpoint(o->aggregate, o->security);
+  } catch (const OptionError& e) {
+    std::cerr << e.what() << "\n";
+    return 2;
+  } catch (const std::exception& e) {
+    std::cerr << "error: " << e.what() << "\n";
+    return 1;
+  }
   o->store = store;
   o->max_message_bytes = static_cast<std::int64_t>(max_mb * 1048576.0);
   *ok = true;

@@ -25,6 +25,7 @@ struct WorkerOptions {
   // Fault injection for the integration tests: after this many tasks, take the
   // next one and never return it (the process hangs until killed). < 0: off.
   int stall_after_tasks = -1;
+  ClientSecurity security;  // CURVE key (role worker) and the aggregator's public key, or plain
 };
 
 // Per-process cache of prepared frames and sparse maps, keyed by (job, index).

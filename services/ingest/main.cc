@@ -27,6 +27,8 @@ struct IngestOptions {
   std::string aggregate = kDefaultAggregateEndpoint;
   std::filesystem::path store;
   std::int64_t max_message_bytes = kDefaultMaxMessageBytes;
+  ServerSecurity security;      // of the bound socket
+  ClientSecurity to_aggregate;  // of the connections to the aggregator (the same key, role ingest)
 };
 
 // Sends `env` to the aggregator until it answers (or the daemon stops / the job is cancelled).
@@ -46,7 +48,7 @@ bool Notify(RequestClient& client, const pb::Envelope& env, const JobStore& stor
 
 void Spool(zmq::context_t& context, const IngestOptions& o, const JobStore& store, const std::string& id,
            std::shared_ptr<Dataset> ds) {
-  RequestClient agg(context, o.aggregate, o.max_message_bytes);
+  RequestClient agg(context, o.aggregate, o.max_message_bytes, o.to_aggregate);
   int spooled = 0;
   try {
     auto frames = ds->OpenFrames();
@@ -81,8 +83,8 @@ void Spool(zmq::context_t& context, const IngestOptions& o, const JobStore& stor
 int Serve(const IngestOptions& o) {
   zmq::context_t context(1);
   JobStore store(o.store);
-  RouterServer server(context, o.endpoint, o.max_message_bytes);
-  RequestClient agg(context, o.aggregate, o.max_message_bytes);
+  RouterServer server(context, o.endpoint, o.max_message_bytes, o.security);
+  RequestClient agg(context, o.aggregate, o.max_message_bytes, o.to_aggregate);
   std::list<std::thread> spoolers;
   spdlog::info("ingest: serving on {} (store {}, aggregator {})", o.endpoint, store.root().string(), o.aggregate);
   while (!StopRequested()) {
@@ -144,6 +146,12 @@ int main(int argc, char** argv) {
   std::string store;
   double max_mb = kDefaultMaxMessageBytes / 1048576.0;
   int verbosity = 0;
+  SecurityFlags security;
+  AddServerSecurityFlags(&app, &security);
+  security.server_key = EndpointFromEnv("LFRECON_AGGREGATE_KEY", "");
+  app.add_option("--aggregate-key", security.server_key,
+                 "The aggregator's public key file (.pub; default $LFRECON_AGGREGATE_KEY); this daemon connects "
+                 "with its own --key, listed as role ingest in the aggregator's allow-list");
   app.add_option("--bind", o.endpoint, "ZeroMQ endpoint to bind (default: $LFRECON_INGEST or loopback)")->capture_default_str();
   app.add_option("--aggregate", o.aggregate, "The aggregator's endpoint")->capture_default_str();
   app.add_option("--store", store, "Job store folder")->required();
@@ -153,6 +161,19 @@ int main(int argc, char** argv) {
   lfrecon::SetupLogging(verbosity);
   o.store = store;
   o.max_message_bytes = static_cast<std::int64_t>(max_mb * 1048576.0);
+  try {
+    o.security = ResolveServerSecurity(security);
+    if (!security.server_key.empty() || !security.key.empty()) o.to_aggregate = ResolveClientSecurity(security);
+    o.to_aggregate.insecure = security.insecure;
+    CheckServerEndpoint(o.endpoint, o.security);
+    CheckClientEndpoint(o.aggregate, o.to_aggregate);
+  } catch (const lfrecon::OptionError& e) {
+    std::cerr << "lfrecon-ingest: " << e.what() << "\n";
+    return 2;
+  } catch (const std::exception& e) {
+    std::cerr << "lfrecon-ingest: error: " << e.what() << "\n";
+    return 1;
+  }
   try {
     InstallStopHandlers();
     return Serve(o);

@@ -13,5 +13,7 @@ void AddDepthCommand(CLI::App& root, int* exit_code);
 void AddRunCommand(CLI::App& root, int* exit_code);
 // submit, status, export, cancel (service_commands.cc)
 void AddServiceCommands(CLI::App& root, int* exit_code);
+// keygen: CURVE key pairs for the service (keygen_command.cc)
+void AddKeygenCommand(CLI::App& root, int* exit_code);
 
 }  // namespace lfrecon::cli

@@ -31,6 +31,7 @@ int main(int argc, char** argv) {
   lfrecon::cli::AddDepthCommand(app, &exit_code);
   lfrecon::cli::AddRunCommand(app, &exit_code);
   lfrecon::cli::AddServiceCommands(app, &exit_code);
+  lfrecon::cli::AddKeygenCommand(app, &exit_code);
 
   try {
     app.parse(argc, argv);

@@ -24,6 +24,23 @@ struct Endpoints {
   std::string ingest = svc::EndpointFromEnv("LFRECON_INGEST", svc::kDefaultIngestEndpoint);
   std::string aggregate = svc::EndpointFromEnv("LFRECON_AGGREGATE", svc::kDefaultAggregateEndpoint);
   int timeout_ms = 30000;
+  // CURVE (common/auth.h): this client's key file and the daemons' public keys.
+  std::string key = svc::EndpointFromEnv("LFRECON_KEY", "");
+  std::string ingest_key = svc::EndpointFromEnv("LFRECON_INGEST_KEY", "");
+  std::string aggregate_key = svc::EndpointFromEnv("LFRECON_AGGREGATE_KEY", "");
+  bool insecure = false;
+  svc::ClientSecurity Security(const std::string& endpoint) const {
+    svc::SecurityFlags f;
+    f.key = key;
+    f.server_key = endpoint == ingest ? ingest_key : aggregate_key;
+    f.insecure = insecure;
+    if (f.key.empty() && f.server_key.empty()) {
+      svc::ClientSecurity plain;
+      plain.insecure = insecure;
+      return plain;
+    }
+    return svc::ResolveClientSecurity(f);
+  }
 };
 
 // Turns an error reply into the CLI's errors (exit 1 for input/job problems, 2 for usage).
@@ -35,9 +52,9 @@ struct Endpoints {
   }
 }
 
-pb::Envelope Call(const std::string& endpoint, const pb::Envelope& req, int timeout_ms) {
+pb::Envelope Call(const Endpoints& e, const std::string& endpoint, const pb::Envelope& req, int timeout_ms) {
   zmq::context_t context(1);
-  svc::RequestClient client(context, endpoint);
+  svc::RequestClient client(context, endpoint, svc::kDefaultMaxMessageBytes, e.Security(endpoint));
   try {
     return client.Call(req, std::chrono::milliseconds(timeout_ms));
   } catch (const svc::ServiceError& e) {
@@ -49,6 +66,12 @@ void AddEndpointFlags(CLI::App* cmd, Endpoints* e, bool ingest) {
   if (ingest) cmd->add_option("--ingest", e->ingest, "lfrecon-ingest endpoint (default $LFRECON_INGEST or loopback)");
   cmd->add_option("--aggregate", e->aggregate, "lfrecon-aggregate endpoint (default $LFRECON_AGGREGATE or loopback)");
   cmd->add_option("--timeout-ms", e->timeout_ms, "How long to wait for a reply")->capture_default_str();
+  cmd->add_option("--key", e->key, "This client's CURVE key file (lfrecon keygen --role client; default $LFRECON_KEY)");
+  if (ingest)
+    cmd->add_option("--ingest-key", e->ingest_key, "lfrecon-ingest's public key file (default $LFRECON_INGEST_KEY)");
+  cmd->add_option("--aggregate-key", e->aggregate_key,
+                  "lfrecon-aggregate's public key file (default $LFRECON_AGGREGATE_KEY)");
+  cmd->add_flag("--insecure", e->insecure, "Allow plain TCP: no authentication, no encryption");
 }
 
 std::string Abs(const fs::path& p) { return p.empty() ? std::string() : fs::absolute(p).lexically_normal().string(); }
@@ -73,7 +96,7 @@ bool Ended(pb::JobState s) { return s == pb::STATE_DONE || s == pb::STATE_FAILED
 pb::JobStatus GetStatus(const Endpoints& e, const std::string& job) {
   pb::Envelope req = svc::NewEnvelope(job);
   req.mutable_status();
-  return Call(e.aggregate, req, e.timeout_ms).job_status();
+  return Call(e, e.aggregate, req, e.timeout_ms).job_status();
 }
 
 // Polls until the job ends (or `timeout_s` passes); prints progress to stderr.
@@ -142,7 +165,7 @@ void AddServiceCommands(CLI::App& root, int* exit_code) {
       spec->mutable_options()->set_no_densify(a->no_densify);
       spec->mutable_options()->set_color_views(a->color_views);
       svc::JobPipelineOptions(spec->options());  // every job option checked here, as lfrecon run does (exit 2)
-      const pb::Envelope reply = Call(a->ep.ingest, req, a->ep.timeout_ms);
+      const pb::Envelope reply = Call(a->ep, a->ep.ingest, req, a->ep.timeout_ms);
       const std::string job = reply.submit_reply().job_id();
       std::cout << job << "\n" << std::flush;
       spdlog::info("submitted {} ({} views)", job, reply.submit_reply().num_views());
@@ -189,7 +212,7 @@ void AddServiceCommands(CLI::App& root, int* exit_code) {
       req.mutable_export_request()->set_refine(a->refine);
       // Waits at least 2 min, 30 min with --refine (a queued refinement waits for the one before it).
       const int wait_ms = std::max(a->ep.timeout_ms, a->refine ? 1800000 : 120000);
-      const pb::Envelope reply = Call(a->ep.aggregate, req, wait_ms);
+      const pb::Envelope reply = Call(a->ep, a->ep.aggregate, req, wait_ms);
       const pb::ExportReply& r = reply.export_reply();
       if (!a->out.parent_path().empty()) fs::create_directories(a->out.parent_path());
       std::ofstream f(a->out, std::ios::binary);
@@ -213,7 +236,7 @@ void AddServiceCommands(CLI::App& root, int* exit_code) {
     cmd->callback([a, exit_code] {
       pb::Envelope req = svc::NewEnvelope(a->job);
       req.mutable_cancel();
-      const pb::JobStatus s = Call(a->ep.aggregate, req, a->ep.timeout_ms).job_status();
+      const pb::JobStatus s = Call(a->ep, a->ep.aggregate, req, a->ep.timeout_ms).job_status();
       if (s.state() != pb::STATE_CANCELLED)
         throw InputError(a->job, "not cancelled: the job had already ended (" + pb::JobState_Name(s.state()).substr(6) + ")");
       std::cout << a->job << ": cancelled\n";

@@ -13,7 +13,8 @@
 
 namespace lfrecon::testing {
 
-// A fresh folder under the system temp dir, named after the running test, removed on destruction.
+// A fresh folder under the system temp dir, named after the running test, mode
+// 0700, removed on destruction.
 class TempDir {
  public:
   TempDir() {
@@ -23,6 +24,8 @@ class TempDir {
              std::to_string(::getpid()));
     std::filesystem::remove_all(path_);
     std::filesystem::create_directories(path_);
+    // Private (0700): the daemons accept ipc:// sockets without keys only in such folders.
+    std::filesystem::permissions(path_, std::filesystem::perms::owner_all);
   }
   ~TempDir() { std::filesystem::remove_all(path_); }
   const std::filesystem::path& path() const { return path_; }
