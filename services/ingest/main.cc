@@ -162,7 +162,11 @@ int main(int argc, char** argv) {
   o.store = store;
   o.max_message_bytes = static_cast<std::int64_t>(max_mb * 1048576.0);
   try {
-    o.security = ResolveServerSecurity(security);
+    // --key serves both sockets: with --allow the bound one is a CURVE server; with
+    // --aggregate-key the connections to the aggregator are CURVE clients.
+    SecurityFlags bound = security;
+    if (bound.allow.empty()) bound.key.clear();
+    o.security = ResolveServerSecurity(bound);
     if (!security.server_key.empty() || !security.key.empty()) o.to_aggregate = ResolveClientSecurity(security);
     o.to_aggregate.insecure = security.insecure;
     CheckServerEndpoint(o.endpoint, o.security);
