@@ -5,6 +5,7 @@
 #include <cctype>
 #include <cmath>
 #include <cstdlib>
+#include <cstdint>
 #include <cstring>
 #include <fstream>
 #include <iterator>
@@ -149,9 +150,89 @@ void WriteExr(const fs::path& path, const cv::Mat& map) {
   if (!ok) throw InputError(path.string(), "cannot write EXR");
 }
 
+ExrHeader ReadExrHeader(const fs::path& path) {
+  const std::string file = path.string();
+  std::ifstream in(path, std::ios::binary);
+  if (!in) throw InputError(file, "cannot open file");
+  // The header (magic, version, attributes up to an empty name) is read from
+  // at most the first 1 MiB; attribute sizes are checked against what is there.
+  constexpr std::size_t kMaxHeaderBytes = 1 << 20;
+  std::string data(kMaxHeaderBytes, '\0');
+  in.read(data.data(), static_cast<std::streamsize>(data.size()));
+  data.resize(static_cast<std::size_t>(in.gcount()));
+  std::size_t pos = 0;
+  auto u32 = [&](const char* what) {
+    if (data.size() - pos < 4) throw InputError(file, what, "EXR header is truncated");
+    std::uint32_t v = 0;
+    for (int i = 3; i >= 0; --i) v = (v << 8) | static_cast<unsigned char>(data[pos + i]);
+    pos += 4;
+    return v;
+  };
+  auto i32 = [&](const char* what) { return static_cast<std::int32_t>(u32(what)); };
+  auto cstring = [&](const char* what, std::size_t max_len) {
+    const std::size_t end = data.find('\0', pos);
+    if (end == std::string::npos) throw InputError(file, what, "EXR header is truncated");
+    if (end - pos > max_len) throw InputError(file, what, "EXR attribute name longer than " + std::to_string(max_len));
+    std::string s = data.substr(pos, end - pos);
+    pos = end + 1;
+    return s;
+  };
+  if (u32("magic") != 20000630u) throw InputError(file, "magic", "not an OpenEXR file");
+  const std::uint32_t version = u32("version");
+  if ((version & 0xff) != 2) throw InputError(file, "version", "OpenEXR version " + std::to_string(version & 0xff) + " not supported");
+  if (version & 0x800) throw InputError(file, "version", "deep EXR files are not depth maps");
+  if (version & 0x1000) throw InputError(file, "version", "multi-part EXR files are not supported");
+  const std::size_t max_name = (version & 0x400) ? 255 : 31;
+  ExrHeader h;
+  h.tiled = (version & 0x200) != 0;
+  bool have_window = false, have_channels = false;
+  long long width = 0, height = 0;
+  while (true) {
+    const std::string name = cstring("attribute name", max_name);
+    if (name.empty()) break;  // end of the header
+    const std::string type = cstring(name.c_str(), max_name);
+    const std::uint32_t size = u32(name.c_str());
+    if (size > data.size() - pos) throw InputError(file, name, "EXR attribute of " + std::to_string(size) + " bytes is truncated");
+    const std::size_t value_end = pos + size;
+    if (name == "dataWindow") {
+      if (type != "box2i" || size != 16) throw InputError(file, name, "expected a box2i of 16 bytes");
+      const long long x0 = i32("dataWindow"), y0 = i32("dataWindow"), x1 = i32("dataWindow"), y1 = i32("dataWindow");
+      width = x1 - x0 + 1;
+      height = y1 - y0 + 1;
+      have_window = true;
+    } else if (name == "channels") {
+      if (type != "chlist") throw InputError(file, name, "expected a chlist");
+      int n = 0;
+      while (pos < value_end && data[pos] != '\0') {
+        cstring("channels", max_name);
+        if (value_end < pos || value_end - pos < 16) throw InputError(file, name, "channel list is truncated");
+        const std::int32_t pixel_type = i32("channels");
+        pos += 8;  // pLinear, reserved, xSampling
+        pos += 4;  // ySampling
+        if (pixel_type < 0 || pixel_type > 2) throw InputError(file, name, "unknown pixel type " + std::to_string(pixel_type));
+        if (++n > kMaxExrChannels) throw InputError(file, name, "more than " + std::to_string(kMaxExrChannels) + " channels");
+      }
+      if (pos >= value_end) throw InputError(file, name, "channel list is not terminated");
+      h.channels = n;
+      have_channels = true;
+    }
+    pos = value_end;
+  }
+  if (!have_window) throw InputError(file, "dataWindow", "missing");
+  if (!have_channels || h.channels == 0) throw InputError(file, "channels", "no channel");
+  if (width < 1 || height < 1 || width > kMaxExrSide || height > kMaxExrSide || width * height > kMaxExrPixels)
+    throw InputError(file, "dataWindow",
+                     std::to_string(width) + "x" + std::to_string(height) + " is not a depth map size (at most " +
+                         std::to_string(kMaxExrSide) + " on a side, " + std::to_string(kMaxExrPixels) + " pixels)");
+  h.width = static_cast<int>(width);
+  h.height = static_cast<int>(height);
+  return h;
+}
+
 cv::Mat ReadExr(const fs::path& path) {
   std::error_code ec;
   if (!fs::is_regular_file(path, ec)) throw InputError(path.string(), "EXR file does not exist");
+  ReadExrHeader(path);  // sizes checked before OpenCV allocates anything
   EnableOpenCvExr();
   cv::Mat raw;
   try {

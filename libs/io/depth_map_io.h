@@ -18,8 +18,23 @@ cv::Mat ReadPfm(const std::filesystem::path& path);
 void EnableOpenCvExr();
 
 // Single-channel float32 EXR. Reading a multi-channel EXR keeps its first channel.
+// ReadExr checks the header (ReadExrHeader) before OpenCV decodes anything.
 void WriteExr(const std::filesystem::path& path, const cv::Mat& map);
 cv::Mat ReadExr(const std::filesystem::path& path);
+
+// What an OpenEXR header says, read without decoding: a single-part image
+// (scanline or tiled) whose data window is at most kMaxExrSide on a side and
+// kMaxExrPixels in all, with 1..kMaxExrChannels channels. Throws InputError
+// naming the file and the attribute otherwise (deep and multi-part files too).
+constexpr long long kMaxExrSide = 1 << 15;
+constexpr long long kMaxExrPixels = 1ll << 26;  // 256 MiB as one float channel
+constexpr int kMaxExrChannels = 64;
+struct ExrHeader {
+  int width = 0, height = 0;
+  int channels = 0;
+  bool tiled = false;
+};
+ExrHeader ReadExrHeader(const std::filesystem::path& path);
 
 // Reads .pfm or .exr by extension.
 cv::Mat ReadDepthMap(const std::filesystem::path& path);

@@ -184,5 +184,61 @@ TEST(DepthMapIoBadInput, NamesTheFile) {
   ExpectInputError([&] { ReadDepthMap(tmp.path() / "d.tiff"); }, {"d.tiff", "unsupported"});
 }
 
+// A minimal OpenEXR header: magic, version 2, a one-channel chlist, a data
+// window, the end of the header (no pixel data).
+std::string ExrHeaderBytes(std::int32_t x1, std::int32_t y1, std::uint32_t version = 2) {
+  std::string b;
+  auto u32 = [&](std::uint32_t v) {
+    for (int i = 0; i < 4; ++i) b.push_back(static_cast<char>((v >> (8 * i)) & 0xff));
+  };
+  auto attr = [&](const std::string& name, const std::string& type, const std::string& value) {
+    b += name + '\0' + type + '\0';
+    u32(static_cast<std::uint32_t>(value.size()));
+    b += value;
+  };
+  u32(20000630u);
+  u32(version);
+  std::string ch = std::string("Y") + '\0';
+  for (std::uint32_t v : {2u, 0u, 1u, 1u})  // FLOAT, pLinear + reserved, xSampling, ySampling
+    for (int i = 0; i < 4; ++i) ch.push_back(static_cast<char>((v >> (8 * i)) & 0xff));
+  ch.push_back('\0');
+  attr("channels", "chlist", ch);
+  std::string box;
+  for (std::int32_t v : {0, 0, x1, y1})
+    for (int i = 0; i < 4; ++i) box.push_back(static_cast<char>((static_cast<std::uint32_t>(v) >> (8 * i)) & 0xff));
+  attr("dataWindow", "box2i", box);
+  b.push_back('\0');
+  return b;
+}
+
+TEST(DepthMapIo, ExrHeaderIsCheckedBeforeDecoding) {
+  TempDir tmp;
+  const cv::Mat depth(6, 7, CV_32F, cv::Scalar(1.5));
+  WriteExr(tmp.path() / "d.exr", depth);
+  const ExrHeader h = ReadExrHeader(tmp.path() / "d.exr");
+  EXPECT_EQ(h.width, 7);
+  EXPECT_EQ(h.height, 6);
+  EXPECT_EQ(h.channels, 1);
+  const fs::path exr = tmp.path() / "h.exr";
+  std::ofstream(exr, std::ios::binary) << ExrHeaderBytes(99, 49);
+  const ExrHeader small = ReadExrHeader(exr);
+  EXPECT_EQ(small.width, 100);
+  EXPECT_EQ(small.height, 50);
+  // A header that claims 100000 x 100000 pixels (40 GB as floats): refused before any decoding.
+  std::ofstream(exr, std::ios::binary) << ExrHeaderBytes(99999, 99999);
+  ExpectInputError([&] { ReadExrHeader(exr); }, {"h.exr", "dataWindow", "100000x100000"});
+  ExpectInputError([&] { ReadExr(exr); }, {"h.exr", "dataWindow"});
+  std::ofstream(exr, std::ios::binary) << ExrHeaderBytes(-5, 10);  // x1 < x0
+  ExpectInputError([&] { ReadExrHeader(exr); }, {"h.exr", "dataWindow"});
+  std::ofstream(exr, std::ios::binary) << ExrHeaderBytes(10, 10, 2 | 0x1000);
+  ExpectInputError([&] { ReadExrHeader(exr); }, {"h.exr", "multi-part"});
+  const std::string full = ExrHeaderBytes(10, 10);
+  for (std::size_t cut : {std::size_t(3), std::size_t(9), std::size_t(30), full.size() - 1}) {
+    std::ofstream(exr, std::ios::binary) << full.substr(0, cut);
+    SCOPED_TRACE(cut);
+    ExpectInputError([&] { ReadExrHeader(exr); }, {"h.exr"});
+  }
+}
+
 }  // namespace
 }  // namespace lfrecon
