@@ -16,6 +16,7 @@ PACKAGES=(
   libgtest-dev libgmock-dev libbenchmark-dev
   libopen3d-dev
   libzmq3-dev cppzmq-dev protobuf-compiler libprotobuf-dev
+  libceres-dev
 )
 
 missing=()
