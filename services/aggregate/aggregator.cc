@@ -11,6 +11,7 @@
 #include <fstream>
 #include <future>
 #include <mutex>
+#include <set>
 #include <sstream>
 #include <thread>
 
@@ -42,6 +43,14 @@ struct Aggregator::Job {
   bool ingest_done = false;
   std::map<std::pair<int, int>, std::pair<Clock::time_point, std::string>> leases;  // (stage, view) -> deadline, worker
   int leases_expired = 0;
+  std::map<std::pair<int, int>, std::set<std::string>> leased_to;  // (stage, view) -> every worker given it
+  struct Tries {
+    int failures = 0;
+    std::set<std::string> failed_on;  // workers it failed on
+  };
+  std::map<std::pair<int, int>, Tries> tries;
+  int tasks_failed = 0;
+  Clock::time_point last_ingest = Clock::now();  // JobCreated, FrameSpooled, IngestDone (or the load)
   // Shared with the job's fusion thread:
   std::mutex grid_mu;  // held while a view is integrated and while an export extracts its mesh
   std::unique_ptr<ProbabilisticFusion> fusion;  // guarded by grid_mu; released when the thread stops
@@ -50,6 +59,7 @@ struct Aggregator::Job {
   std::deque<std::pair<int, bool>> queue;  // (view, append to fused.log): stored dense maps to fuse, in order
   std::atomic<bool> stop{false};
   std::vector<char> fused;
+  std::vector<int> unreadable;  // stored dense maps the fusion thread could not read: done again
   std::atomic<int> views_fused{0};  // changes under grid_mu (with the grid)
   std::atomic<std::uint64_t> active_voxels{0};
   enum Outcome { kFusing = 0, kFinished = 1, kFailed = 2 };
@@ -73,15 +83,18 @@ struct Aggregator::Job {
 };
 
 Aggregator::Aggregator(const AggregatorOptions& options) : options_(options), store_(options.store) {
+  // One aggregator per store: a second one would lease and fuse every view again.
+  try {
+    lock_ = std::make_unique<FileLock>(store_.root() / "aggregate.lock");
+  } catch (const std::runtime_error& e) {
+    throw std::runtime_error("another lfrecon-aggregate serves the job store " + store_.root().string() + " (" +
+                             e.what() + ")");
+  }
   // Resume every job the store holds that has not ended.
   for (const auto& e : fs::directory_iterator(store_.root())) {
     const std::string id = e.path().filename().string();
     if (!store_.Exists(id) || store_.ReadText(id, "status.pb")) continue;
-    try {
-      jobs_[id] = LoadJob(id);
-    } catch (const std::exception& ex) {
-      spdlog::error("aggregate: cannot resume job {}: {}", id, ex.what());
-    }
+    jobs_[id] = LoadOrFail(id);
   }
 }
 
@@ -229,6 +242,17 @@ void ColourMesh(const JobStore& store, const JobGeometry& geo, const std::vector
 
 }  // namespace
 
+std::unique_ptr<Aggregator::Job> Aggregator::LoadOrFail(const std::string& id) {
+  try {
+    return LoadJob(id);
+  } catch (const std::exception& e) {
+    auto job = std::make_unique<Job>();
+    job->id = id;
+    EndJob(*job, pb::STATE_FAILED, std::string("cannot load the job: ") + e.what());
+    return job;
+  }
+}
+
 std::unique_ptr<Aggregator::Job> Aggregator::LoadJob(const std::string& id) {
   auto job = std::make_unique<Job>();
   job->id = id;
@@ -253,9 +277,33 @@ std::unique_ptr<Aggregator::Job> Aggregator::LoadJob(const std::string& id) {
   job->sparse_ok.assign(n, 0);
   job->dense_ok.assign(n, 0);
   job->fused.assign(n, 0);
+  // What a crash (or a power loss before the store synced its files) left: a
+  // stored file too short to hold its view is removed and that view done again.
+  const fs::path dir = store_.JobDir(id);
+  for (const char* sub : {"sparse", "dense"}) {  // this daemon's temporary files (it holds the store's lock)
+    std::error_code ec;
+    for (const auto& e : fs::directory_iterator(dir / sub, ec))
+      if (e.path().filename().string().find(".tmp") != std::string::npos) fs::remove(e.path(), ec);
+  }
+  auto intact = [&](const fs::path& p, std::uintmax_t min_bytes) {
+    std::error_code ec;
+    const std::uintmax_t size = fs::file_size(p, ec);
+    if (ec) return false;
+    if (size >= min_bytes) return true;
+    spdlog::warn("aggregate: job {}: {} holds {} bytes, at least {} expected: removed", id, p.string(), size, min_bytes);
+    fs::remove(p, ec);
+    return false;
+  };
+  int bad_frame = -1;
   for (int k = 0; k < n; ++k) {
-    if (store_.HasFrame(id, k)) job->frame_ok[k] = 1, ++job->frames_spooled;
-    if (store_.HasMap(id, pb::MAP_SPARSE, k)) job->sparse_ok[k] = 1, ++job->sparse_done;
+    const std::uintmax_t pixels = static_cast<std::uintmax_t>(job->geo.views[k].width) * job->geo.views[k].height;
+    if (store_.HasFrame(id, k)) {
+      if (intact(store_.FramePath(id, k), pixels * 12)) job->frame_ok[k] = 1, ++job->frames_spooled;
+      else if (bad_frame < 0) bad_frame = k;
+    }
+    if (store_.HasMap(id, pb::MAP_SPARSE, k) && intact(store_.MapPath(id, pb::MAP_SPARSE, k), pixels * 4))
+      job->sparse_ok[k] = 1, ++job->sparse_done;
+    if (store_.HasMap(id, pb::MAP_DENSE, k)) intact(store_.MapPath(id, pb::MAP_DENSE, k), pixels * 4);
   }
   job->ingest_done = store_.ReadText(id, "ingest.done").has_value();
   if (job->ingest_done) job->state = pb::STATE_RUNNING;
@@ -283,6 +331,11 @@ std::unique_ptr<Aggregator::Job> Aggregator::LoadJob(const std::string& id) {
     job->fusion.reset();
     return job;
   }
+  if (bad_frame >= 0 && job->ingest_done) {  // ingest will not send it again
+    EndJob(*job, pb::STATE_FAILED, "frame " + std::to_string(bad_frame) + " in the job store is corrupt");
+    job->fusion.reset();
+    return job;
+  }
   job->thread = std::thread(&Aggregator::FusionLoop, this, job.get());
   return job;
 }
@@ -294,7 +347,7 @@ Aggregator::Job* Aggregator::FindJob(const std::string& id) {
     return it->second.get();
   }
   if (!store_.Exists(id)) return nullptr;
-  auto job = LoadJob(id);
+  auto job = LoadOrFail(id);
   Job* p = job.get();
   jobs_[id] = std::move(job);
   return p;
@@ -339,7 +392,18 @@ void Aggregator::FusionLoop(Job* jp) const {
         if (job.fused[item.first]) continue;
       }
       const int v = item.first;
-      const DepthMap map = store_.ReadMap(id, pb::MAP_DENSE, v, job.geo.views[v]);
+      DepthMap map;
+      try {
+        map = store_.ReadMap(id, pb::MAP_DENSE, v, job.geo.views[v]);
+      } catch (const InputError& e) {  // a map the store lost (a crash): the view is done again
+        spdlog::warn("aggregate: job {}: stored dense map of view {} unreadable ({}): removed, re-issued", id, v,
+                     e.what());
+        std::error_code ec;
+        fs::remove(store_.MapPath(id, pb::MAP_DENSE, v), ec);
+        std::lock_guard<std::mutex> lk(job.queue_mu);
+        job.unreadable.push_back(v);
+        continue;
+      }
       {
         std::lock_guard<std::mutex> grid(job.grid_mu);
         job.fusion->Integrate(job.geo.views[v], map, v);
@@ -393,6 +457,20 @@ void Aggregator::FusionLoop(Job* jp) const {
 
 void Aggregator::Reap(Job& job) {
   if (!job.active) return;
+  std::vector<int> unreadable;
+  {
+    std::lock_guard<std::mutex> lk(job.queue_mu);
+    unreadable.swap(job.unreadable);
+  }
+  for (int v : unreadable)
+    if (job.dense_ok[v]) job.dense_ok[v] = 0, --job.dense_done;
+  if (!job.ingest_done && Clock::now() - job.last_ingest > std::chrono::duration<double>(options_.ingest_timeout_s)) {
+    EndJob(job, pb::STATE_FAILED,
+           "nothing from ingest for " + std::to_string(static_cast<int>(options_.ingest_timeout_s)) + " s after " +
+               std::to_string(job.frames_spooled) + " of " + std::to_string(job.n) +
+               " frames (lfrecon-ingest died and did not resume the job)");
+    return;
+  }
   const int outcome = job.outcome;
   if (outcome == Job::kFailed) {
     EndJob(job, pb::STATE_FAILED, "fusion: " + job.fusion_error);
@@ -416,6 +494,7 @@ pb::JobStatus Aggregator::Status(const Job& job) const {
   s.set_seconds(std::chrono::duration<double>(Clock::now() - job.created).count());
   s.set_active_voxels(static_cast<std::uint32_t>(job.active_voxels));
   s.set_leases_expired(job.leases_expired);
+  s.set_tasks_failed(job.tasks_failed);
   if (job.state == pb::STATE_DONE) s.set_triangles(job.triangles);
   return s;
 }
@@ -427,23 +506,55 @@ void Aggregator::EndJob(Job& job, pb::JobState state, const std::string& message
   job.final_status = Status(job);
   job.active = false;
   StopFusion(job, false);  // it stops after the view it is integrating, and releases the grid
-  store_.WriteText(job.id, "status.pb", job.final_status.SerializeAsString());
+  try {
+    store_.WriteText(job.id, "status.pb", job.final_status.SerializeAsString());
+  } catch (const std::exception& e) {  // a full disk: the job ends anyway; a restart loads it again
+    spdlog::error("aggregate: job {}: cannot record its end: {}", job.id, e.what());
+  }
   if (state == pb::STATE_FAILED) spdlog::error("aggregate: job {} failed: {}", job.id, message);
   else spdlog::info("aggregate: job {} {}", job.id, pb::JobState_Name(state));
 }
 
 void Aggregator::ExpireLeases(Job& job) {
   const auto now = Clock::now();
+  std::vector<std::pair<std::pair<int, int>, std::string>> expired;
   for (auto it = job.leases.begin(); it != job.leases.end();) {
     if (it->second.first < now) {
-      ++job.leases_expired;
-      spdlog::warn("aggregate: job {}: {} of view {} not returned by {} in time; re-issued", job.id,
-                   it->first.first == pb::STAGE_DEPTH ? "depth" : "propagate", it->first.second, it->second.second);
+      expired.emplace_back(it->first, it->second.second);
       it = job.leases.erase(it);
     } else {
       ++it;
     }
   }
+  for (const auto& [key, worker] : expired) {
+    ++job.leases_expired;
+    if (FailTask(job, key.first, key.second, worker,
+                 "not returned by " + worker + " within its lease of " + std::to_string(options_.lease_ms) + " ms"))
+      return;
+  }
+}
+
+bool Aggregator::FailTask(Job& job, int stage, int view, const std::string& worker, const std::string& why) {
+  Job::Tries& t = job.tries[{stage, view}];
+  ++t.failures;
+  ++job.tasks_failed;
+  t.failed_on.insert(worker);
+  const std::string task = std::string(stage == pb::STAGE_DEPTH ? "depth" : "propagate") + " of view " +
+                           std::to_string(view);
+  if (t.failures >= options_.max_task_attempts) {
+    EndJob(job, pb::STATE_FAILED, task + " failed " + std::to_string(t.failures) + " times; the last: " + why);
+    return true;
+  }
+  spdlog::warn("aggregate: job {}: {} failed (attempt {} of {}): {}; re-issued", job.id, task, t.failures,
+               options_.max_task_attempts, why);
+  return false;
+}
+
+bool Aggregator::OtherWorkerAlive(int stage, const std::string& worker) const {
+  const auto recent = Clock::now() - std::chrono::milliseconds(std::min(options_.lease_ms, 10000));
+  for (const auto& [name, seen] : seen_workers_[stage])
+    if (name != worker && seen > recent) return true;
+  return false;
 }
 
 pb::Envelope Aggregator::HandleTaskRequest(const pb::Envelope& req) {
@@ -451,12 +562,24 @@ pb::Envelope Aggregator::HandleTaskRequest(const pb::Envelope& req) {
   const int stage = tr.stage();
   if (stage != pb::STAGE_DEPTH && stage != pb::STAGE_PROPAGATE)
     return ErrorEnvelope(pb::ERROR_BAD_REQUEST, "unknown stage " + std::to_string(stage));
+  auto& seen = seen_workers_[stage];
+  if (seen.size() > 1000) {  // forget workers gone for a minute
+    const auto old = Clock::now() - std::chrono::seconds(60);
+    for (auto it = seen.begin(); it != seen.end();) it = it->second < old ? seen.erase(it) : std::next(it);
+  }
+  seen[tr.worker()] = Clock::now();
+  const bool others = OtherWorkerAlive(stage, tr.worker());
   for (auto& [id, jp] : jobs_) {
     Job& job = *jp;
     if (!job.active) continue;
     ExpireLeases(job);
+    if (!job.active) continue;  // a task failed too often
     for (int v = 0; v < job.n; ++v) {
       if (job.leases.count({stage, v})) continue;
+      if (others) {  // a task that failed on this worker goes to another one
+        const auto t = job.tries.find({stage, v});
+        if (t != job.tries.end() && t->second.failed_on.count(tr.worker())) continue;
+      }
       pb::Envelope out = NewEnvelope(id);
       pb::Task* task = out.mutable_task();
       if (stage == pb::STAGE_DEPTH) {
@@ -480,6 +603,7 @@ pb::Envelope Aggregator::HandleTaskRequest(const pb::Envelope& req) {
       task->set_view(v);
       task->set_lease_ms(options_.lease_ms);
       job.leases[{stage, v}] = {Clock::now() + std::chrono::milliseconds(options_.lease_ms), tr.worker()};
+      job.leased_to[{stage, v}].insert(tr.worker());
       spdlog::debug("aggregate: job {}: {} of view {} -> {}", id, stage == pb::STAGE_DEPTH ? "depth" : "propagate", v,
                     tr.worker());
       return out;
@@ -500,35 +624,54 @@ pb::Envelope Aggregator::HandleTaskResult(Job& job, const pb::TaskResult& r) {
   if (v < 0 || v >= job.n) return ErrorEnvelope(pb::ERROR_BAD_REQUEST, "view " + std::to_string(v) + " out of range", job.id);
   if (r.stage() != pb::STAGE_DEPTH && r.stage() != pb::STAGE_PROPAGATE)
     return ErrorEnvelope(pb::ERROR_BAD_REQUEST, "unknown stage", job.id);
-  job.leases.erase({static_cast<int>(r.stage()), v});
+  // A result must answer a lease: this view, this stage, given to this worker
+  // (now or before it expired; a restarted aggregator has given nothing yet).
+  const std::pair<int, int> key{static_cast<int>(r.stage()), v};
+  const std::string task = std::string(r.stage() == pb::STAGE_DEPTH ? "depth" : "propagate") + " of view " +
+                           std::to_string(v);
+  const auto given = job.leased_to.find(key);
+  if (given == job.leased_to.end() || !given->second.count(r.worker()))
+    return ErrorEnvelope(pb::ERROR_BAD_REQUEST, task + " was not leased to '" + r.worker() + "'", job.id);
+  const bool done = r.stage() == pb::STAGE_DEPTH ? job.sparse_ok[v] : job.dense_ok[v];
+  const auto lease = job.leases.find(key);
   if (!r.error().empty()) {
-    EndJob(job, pb::STATE_FAILED, "view " + std::to_string(v) + ": " + r.error());
+    if (lease != job.leases.end() && lease->second.second == r.worker()) job.leases.erase(lease);
+    if (!done) FailTask(job, key.first, v, r.worker(), r.worker() + ": " + r.error());
     pb::Envelope ack = NewEnvelope(job.id);
     ack.mutable_ack();
     return ack;
   }
   const std::string what = "task result of view " + std::to_string(v) + " from " + r.worker();
+  if (r.map().view() != r.view())
+    return ErrorEnvelope(pb::ERROR_BAD_REQUEST, what + ": its depth map says view " + std::to_string(r.map().view()),
+                         job.id);
   DepthMap map;
   try {
     map = DepthMapFromProto(r.map(), job.geo.views[v].width, job.geo.views[v].height, what);
   } catch (const InputError& e) {
     return ErrorEnvelope(pb::ERROR_BAD_REQUEST, e.what(), job.id);
   }
-  if (r.stage() == pb::STAGE_DEPTH) {
-    if (r.map().kind() != pb::MAP_SPARSE) return ErrorEnvelope(pb::ERROR_BAD_REQUEST, what + ": not a sparse map", job.id);
-    if (!job.sparse_ok[v]) {
-      store_.WriteMap(job.id, r.map());
-      job.sparse_ok[v] = 1;
-      ++job.sparse_done;
-    }
-  } else {
-    if (r.map().kind() != pb::MAP_DENSE && r.map().kind() != pb::MAP_FILTERED)
-      return ErrorEnvelope(pb::ERROR_BAD_REQUEST, what + ": not a dense map", job.id);
-    if (!job.dense_ok[v]) {
-      pb::DepthMap stored = r.map();
-      stored.set_kind(pb::MAP_DENSE);  // the map that is fused, whatever the stage made
+  const bool sparse_stage = r.stage() == pb::STAGE_DEPTH;
+  if (sparse_stage ? r.map().kind() != pb::MAP_SPARSE
+                   : r.map().kind() != pb::MAP_DENSE && r.map().kind() != pb::MAP_FILTERED)
+    return ErrorEnvelope(pb::ERROR_BAD_REQUEST, what + (sparse_stage ? ": not a sparse map" : ": not a dense map"),
+                         job.id);
+  if (lease != job.leases.end()) job.leases.erase(lease);
+  if (!done) {
+    pb::DepthMap stored = r.map();
+    stored.set_view(v);
+    if (!sparse_stage) stored.set_kind(pb::MAP_DENSE);  // the map that is fused, whatever the stage made
+    try {
       // In the store (the checkpoint) before the ack: a restart fuses it if the fusion thread did not.
       store_.WriteMap(job.id, stored);
+    } catch (const std::exception& e) {  // a full disk: the job fails, nothing is re-issued for ever
+      EndJob(job, pb::STATE_FAILED, "job store: " + std::string(e.what()));
+      return ErrorEnvelope(pb::ERROR_INTERNAL, "job " + job.id + " failed: " + job.message, job.id);
+    }
+    if (sparse_stage) {
+      job.sparse_ok[v] = 1;
+      ++job.sparse_done;
+    } else {
       Enqueue(job, v, true);
     }
   }
@@ -668,10 +811,12 @@ pb::Envelope Aggregator::Handle(const pb::Envelope& req, Deferred* deferred) {
       case pb::Envelope::kTaskResult:
         return HandleTaskResult(*job, req.task_result());
       case pb::Envelope::kJobCreated:
+        job->last_ingest = Clock::now();
         return ack;  // FindJob loaded it
       case pb::Envelope::kFrameSpooled: {
         const int k = static_cast<int>(req.frame_spooled().index());
         if (!job->active) return ack;
+        job->last_ingest = Clock::now();
         if (k < 0 || k >= job->n) return ErrorEnvelope(pb::ERROR_BAD_REQUEST, "frame " + std::to_string(k) + " out of range", job->id);
         if (!store_.HasFrame(job->id, k))
           return ErrorEnvelope(pb::ERROR_BAD_REQUEST, "frame " + std::to_string(k) + " is not in the job store", job->id);

@@ -51,6 +51,13 @@ struct AggregatorOptions {
   std::int64_t max_message_bytes = kDefaultMaxMessageBytes;
   int lease_ms = 60000;  // a view task not returned within this is re-issued
   int retry_ms = 20;     // a worker with nothing to do asks again after this
+  // A view task that failed this many times (error results, expired leases)
+  // fails its job with the last reason; before that it is re-issued, to
+  // another worker of the stage when one asked for work recently.
+  int max_task_attempts = 3;
+  // A job still ingesting that has heard nothing from ingest for this long
+  // fails (ingest died and did not come back to resume it).
+  double ingest_timeout_s = 600;
   // Fault injection for the integration tests: each view's integration holds
   // the grid this much longer (slow fusion, as a big grid has). 0: off.
   int fusion_delay_ms = 0;
@@ -99,9 +106,17 @@ class Aggregator {
   void EndJob(Job& job, pb::JobState state, const std::string& message);
   pb::JobStatus Status(const Job& job) const;
   void ExpireLeases(Job& job);
+  // Counts a failed attempt at a view task; true if the job failed of it.
+  bool FailTask(Job& job, int stage, int view, const std::string& worker, const std::string& why);
+  // Another worker of `stage` than `worker` asked for work within the last few seconds.
+  bool OtherWorkerAlive(int stage, const std::string& worker) const;
+  // A job that cannot be loaded (bad manifest or options) is FAILED with the reason, not an error for ever.
+  std::unique_ptr<Job> LoadOrFail(const std::string& id);
 
   AggregatorOptions options_;
   JobStore store_;
+  std::unique_ptr<FileLock> lock_;  // STORE/aggregate.lock: one aggregator per store
+  std::map<std::string, Clock::time_point> seen_workers_[3];  // per stage: worker -> its last task request
   std::map<std::string, std::unique_ptr<Job>> jobs_;
 };
 

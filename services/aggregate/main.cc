@@ -28,13 +28,21 @@ int main(int argc, char** argv) {
   app.add_option("--lease-ms", o.lease_ms, "A view task not returned within this is re-issued")->capture_default_str();
   app.add_option("--fusion-delay-ms", o.fusion_delay_ms,
                  "Fault injection (tests): each view's integration holds the grid this much longer");
+  app.add_option("--max-task-attempts", o.max_task_attempts,
+                 "A view task that failed this many times (worker errors, expired leases) fails its job")
+      ->capture_default_str();
+  app.add_option("--ingest-timeout-s", o.ingest_timeout_s,
+                 "A job still ingesting that has heard nothing from ingest for this long fails")
+      ->capture_default_str();
   app.add_flag("-v,--verbose", verbosity, "More logging");
   CLI11_PARSE(app, argc, argv);
   lfrecon::SetupLogging(verbosity);
   o.store = store;
   o.max_message_bytes = static_cast<std::int64_t>(max_mb * 1048576.0);
-  if (o.lease_ms < 1 || o.max_message_bytes < 1024 || o.fusion_delay_ms < 0) {
-    std::cerr << "lfrecon-aggregate: --lease-ms must be >= 1, --max-message-mb >= 0.001 and --fusion-delay-ms >= 0\n";
+  if (o.lease_ms < 1 || o.max_message_bytes < 1024 || o.fusion_delay_ms < 0 || o.max_task_attempts < 1 ||
+      !(o.ingest_timeout_s > 0)) {
+    std::cerr << "lfrecon-aggregate: --lease-ms must be >= 1, --max-message-mb >= 0.001, --fusion-delay-ms >= 0, "
+                 "--max-task-attempts >= 1 and --ingest-timeout-s > 0\n";
     return 2;
   }
   try {

@@ -1,5 +1,7 @@
 #include "job_store.h"
 
+#include <fcntl.h>
+#include <sys/file.h>
 #include <unistd.h>
 
 #include <chrono>
@@ -39,16 +41,78 @@ void ParseFile(const fs::path& path, T* msg) {
 
 }  // namespace
 
+namespace {
+
+[[noreturn]] void ThrowErrno(const fs::path& path, const std::string& what, int err) {
+  throw InputError(path.string(), what + ": " + std::strerror(err));
+}
+
+void FsyncDir(const fs::path& dir) {
+  const int fd = ::open(dir.empty() ? "." : dir.c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC);
+  if (fd < 0) ThrowErrno(dir, "cannot open folder to sync it", errno);
+  const int rc = ::fsync(fd);
+  const int err = errno;
+  ::close(fd);
+  if (rc != 0) ThrowErrno(dir, "cannot sync folder", err);
+}
+
+void WriteAll(int fd, const char* data, std::size_t size, const fs::path& path) {
+  while (size > 0) {
+    const ssize_t n = ::write(fd, data, size);
+    if (n < 0 && errno == EINTR) continue;
+    if (n < 0) ThrowErrno(path, "cannot write", errno);
+    data += n;
+    size -= static_cast<std::size_t>(n);
+  }
+}
+
+}  // namespace
+
+fs::path TempPathFor(const fs::path& path) {
+  static std::atomic<unsigned> counter{0};
+  return path.string() + ".tmp" + std::to_string(::getpid()) + "_" + std::to_string(counter++);
+}
+
+void CommitFile(const fs::path& tmp, const fs::path& path) {
+  try {
+    const int fd = ::open(tmp.c_str(), O_RDONLY | O_CLOEXEC);
+    if (fd < 0) ThrowErrno(tmp, "cannot open", errno);
+    const int rc = ::fsync(fd);
+    const int err = errno;
+    ::close(fd);
+    if (rc != 0) ThrowErrno(tmp, "cannot sync", err);
+    if (::rename(tmp.c_str(), path.c_str()) != 0) ThrowErrno(path, "cannot rename " + tmp.string() + " to it", errno);
+  } catch (...) {
+    ::unlink(tmp.c_str());
+    throw;
+  }
+  FsyncDir(path.parent_path());
+}
+
 void WriteFileAtomic(const fs::path& path, const std::string& bytes) {
   fs::create_directories(path.parent_path());
-  static std::atomic<unsigned> counter{0};
-  const fs::path tmp = path.string() + ".tmp" + std::to_string(::getpid()) + "_" + std::to_string(counter++);
-  {
-    std::ofstream f(tmp, std::ios::binary);
-    f.write(bytes.data(), static_cast<std::streamsize>(bytes.size()));
-    if (!f) throw InputError(tmp.string(), "cannot write");
+  const fs::path tmp = TempPathFor(path);
+  const int fd = ::open(tmp.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, 0644);
+  if (fd < 0) ThrowErrno(tmp, "cannot create", errno);
+  try {
+    WriteAll(fd, bytes.data(), bytes.size(), tmp);
+    if (::fsync(fd) != 0) ThrowErrno(tmp, "cannot sync", errno);
+  } catch (...) {
+    ::close(fd);
+    ::unlink(tmp.c_str());  // no temporary file is left behind (a full disk used to collect thousands)
+    throw;
   }
-  fs::rename(tmp, path);
+  if (::close(fd) != 0) {
+    const int err = errno;
+    ::unlink(tmp.c_str());
+    ThrowErrno(tmp, "cannot write", err);
+  }
+  if (::rename(tmp.c_str(), path.c_str()) != 0) {
+    const int err = errno;
+    ::unlink(tmp.c_str());
+    ThrowErrno(path, "cannot rename " + tmp.string() + " to it", err);
+  }
+  FsyncDir(path.parent_path());
 }
 
 std::string ReadFileBytes(const fs::path& path) {
@@ -57,6 +121,24 @@ std::string ReadFileBytes(const fs::path& path) {
   std::ostringstream ss;
   ss << f.rdbuf();
   return ss.str();
+}
+
+FileLock::FileLock(const fs::path& file) {
+  fd_ = ::open(file.c_str(), O_RDWR | O_CREAT | O_CLOEXEC, 0644);
+  if (fd_ < 0) ThrowErrno(file, "cannot open lock file", errno);
+  if (::flock(fd_, LOCK_EX | LOCK_NB) != 0) {
+    const int err = errno;
+    ::close(fd_);
+    fd_ = -1;
+    if (err == EWOULDBLOCK) throw std::runtime_error(file.string() + " is locked by another process");
+    ThrowErrno(file, "cannot lock", err);
+  }
+  const std::string pid = std::to_string(::getpid()) + "\n";  // who holds it, for people
+  if (::ftruncate(fd_, 0) == 0) (void)!::write(fd_, pid.data(), pid.size());
+}
+
+FileLock::~FileLock() {
+  if (fd_ >= 0) ::close(fd_);
 }
 
 JobStore::JobStore(fs::path root) : root_(std::move(root)) { fs::create_directories(root_); }
@@ -141,10 +223,18 @@ std::optional<std::string> JobStore::ReadText(const std::string& id, const std::
 }
 
 void JobStore::AppendLine(const std::string& id, const std::string& name, const std::string& line) const {
-  std::ofstream f(JobDir(id) / name, std::ios::app);
-  f << line << "\n";
-  f.flush();
-  if (!f) throw InputError((JobDir(id) / name).string(), "cannot append");
+  const fs::path path = JobDir(id) / name;
+  const int fd = ::open(path.c_str(), O_WRONLY | O_CREAT | O_APPEND | O_CLOEXEC, 0644);
+  if (fd < 0) ThrowErrno(path, "cannot append", errno);
+  const std::string text = line + "\n";
+  try {
+    WriteAll(fd, text.data(), text.size(), path);
+    if (::fsync(fd) != 0) ThrowErrno(path, "cannot sync", errno);
+  } catch (...) {
+    ::close(fd);
+    throw;
+  }
+  ::close(fd);
 }
 
 // ---- conversions ---------------------------------------------------------------------

@@ -65,9 +65,31 @@ class JobStore {
   std::filesystem::path root_;
 };
 
-// Writes `bytes` to `path` atomically (temporary file + rename).
+// Writes `bytes` to `path` atomically and durably: a temporary file, fsync,
+// rename, fsync of the folder, so a restart (even after a power loss) sees the
+// whole file or the old one. On failure (a full disk) the temporary file is
+// removed and InputError names the file and the system's reason.
 void WriteFileAtomic(const std::filesystem::path& path, const std::string& bytes);
+// A temporary name beside `path`, and its commit: fsync, rename onto `path`,
+// fsync of the folder (the temporary file is removed on failure). For files
+// written by other code (meshes): write to TempPathFor(path), then CommitFile.
+std::filesystem::path TempPathFor(const std::filesystem::path& path);
+void CommitFile(const std::filesystem::path& tmp, const std::filesystem::path& path);
 std::string ReadFileBytes(const std::filesystem::path& path);  // throws InputError
+
+// An exclusive flock(2) on `file` for the object's lifetime (the kernel drops
+// it when the process dies, kill -9 included). Throws std::runtime_error naming
+// the file if another process holds it.
+class FileLock {
+ public:
+  explicit FileLock(const std::filesystem::path& file);
+  ~FileLock();
+  FileLock(const FileLock&) = delete;
+  FileLock& operator=(const FileLock&) = delete;
+
+ private:
+  int fd_ = -1;
+};
 
 // Conversions between the messages and the library types (all validate sizes
 // and finiteness and throw InputError with `what` naming the source).

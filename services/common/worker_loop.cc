@@ -112,6 +112,7 @@ int RunWorker(const WorkerOptions& o, pb::Stage stage, const std::string& name, 
     Timer t;
     try {
       if (!JobStore::ValidJobId(job)) throw std::invalid_argument("invalid job id '" + job + "'");
+      if (tasks < o.fail_tasks) throw std::runtime_error("--fail-tasks " + std::to_string(o.fail_tasks) + ": fault injection");
       cache.BeginTask();
       *r->mutable_map() = compute(task, job, cache);
       cache.Trim();
@@ -129,6 +130,15 @@ int RunWorker(const WorkerOptions& o, pb::Stage stage, const std::string& name, 
       if (!ack) continue;
       delivered = true;
       if (ack->has_error()) spdlog::warn("{}: result of view {} refused: {}", name, task.view(), ack->error().message());
+      if (ack->has_error() && ack->error().code() == pb::ERROR_TOO_LARGE && r->error().empty()) {
+        // Its map never reached the aggregator: say so (a small message), so the
+        // view is retried a bounded number of times instead of leased for ever.
+        const std::size_t bytes = result.ByteSizeLong();
+        r->clear_map();
+        r->set_error("result of " + std::to_string(bytes) + " bytes refused by the aggregator: " +
+                     ack->error().message());
+        delivered = false;
+      }
     }
     spdlog::debug("{}: view {} of job {} in {:.3f} s", name, task.view(), job, t.Seconds());
   }
@@ -152,6 +162,7 @@ int ParseWorkerFlags(int argc, char** argv, const std::string& description, Work
   app.add_option("--cache", o->cache_entries, "Frames/maps kept between tasks")->capture_default_str();
   app.add_option("--stall-after-tasks", o->stall_after_tasks,
                  "Fault injection (tests): hold the task after this many until killed");
+  app.add_option("--fail-tasks", o->fail_tasks, "Fault injection (tests): the first this many tasks report an error");
   app.add_flag("-v,--verbose", verbosity, "More logging");
   *ok = false;
   try {

@@ -25,6 +25,8 @@ struct WorkerOptions {
   // Fault injection for the integration tests: after this many tasks, take the
   // next one and never return it (the process hangs until killed). < 0: off.
   int stall_after_tasks = -1;
+  // Fault injection for the integration tests: the first this many tasks report an error.
+  int fail_tasks = 0;
   ClientSecurity security;  // CURVE key (role worker) and the aggregator's public key, or plain
 };
 

@@ -27,6 +27,7 @@ struct IngestOptions {
   std::string aggregate = kDefaultAggregateEndpoint;
   std::filesystem::path store;
   std::int64_t max_message_bytes = kDefaultMaxMessageBytes;
+  int frame_delay_ms = 0;  // fault injection (tests): a pause after each spooled frame
   ServerSecurity security;      // of the bound socket
   ClientSecurity to_aggregate;  // of the connections to the aggregator (the same key, role ingest)
 };
@@ -46,10 +47,13 @@ bool Notify(RequestClient& client, const pb::Envelope& env, const JobStore& stor
   return false;
 }
 
+// Spools the frames of job `id`. `resume`: a job this daemon (or a previous run
+// of it, killed) had started: frames already in the store are kept and only
+// announced again, the others are read (random access) and spooled.
 void Spool(zmq::context_t& context, const IngestOptions& o, const JobStore& store, const std::string& id,
-           std::shared_ptr<Dataset> ds) {
+           std::shared_ptr<Dataset> ds, bool resume) {
   RequestClient agg(context, o.aggregate, o.max_message_bytes, o.to_aggregate);
-  int spooled = 0;
+  int spooled = 0, kept = 0;
   try {
     auto frames = ds->OpenFrames();
     Frame frame;
@@ -60,13 +64,20 @@ void Spool(zmq::context_t& context, const IngestOptions& o, const JobStore& stor
         spdlog::info("ingest: job {} cancelled after {} frames", id, spooled);
         return;
       }
-      if (!frames->Next(&frame)) break;
-      store.WriteFrame(id, FrameToProto(k, frame.image, CameraToProto(ds->View(k), ds->views()[k].name)));
+      if (resume && store.HasFrame(id, k)) {
+        ++kept;
+      } else {
+        if (resume) frame = frames->Read(k);
+        else if (!frames->Next(&frame)) break;
+        store.WriteFrame(id, FrameToProto(k, frame.image, CameraToProto(ds->View(k), ds->views()[k].name)));
+        if (o.frame_delay_ms > 0) std::this_thread::sleep_for(std::chrono::milliseconds(o.frame_delay_ms));
+      }
       ++spooled;
       pb::Envelope env = NewEnvelope(id);
       env.mutable_frame_spooled()->set_index(k);
       if (!Notify(agg, env, store, id)) return;
     }
+    if (resume) spdlog::info("ingest: job {} resumed: {} frames were in the store already", id, kept);
     store.WriteText(id, "ingest.done", std::to_string(spooled));
     pb::Envelope env = NewEnvelope(id);
     env.mutable_ingest_done()->set_num_frames(spooled);
@@ -83,9 +94,35 @@ void Spool(zmq::context_t& context, const IngestOptions& o, const JobStore& stor
 int Serve(const IngestOptions& o) {
   zmq::context_t context(1);
   JobStore store(o.store);
+  // One ingest per store: two would both resume (and spool) the same jobs.
+  FileLock lock(store.root() / "ingest.lock");
   RouterServer server(context, o.endpoint, o.max_message_bytes, o.security);
   RequestClient agg(context, o.aggregate, o.max_message_bytes, o.to_aggregate);
   std::list<std::thread> spoolers;
+  // Jobs a killed ingest left unfinished (no ingest.done, not ended): spooled on from where they stopped.
+  for (const auto& e : std::filesystem::directory_iterator(store.root())) {
+    const std::string id = e.path().filename().string();
+    if (!store.Exists(id)) continue;
+    if (store.ReadText(id, "ingest.done") || store.ReadText(id, "status.pb") || store.ReadText(id, "cancelled")) continue;
+    try {
+      const pb::JobManifest m = store.ReadManifest(id);
+      auto ds = std::make_shared<Dataset>(Dataset::Open(ToDatasetOptions(m.spec())));
+      if (ds->NumViews() != m.views_size())
+        throw InputError(m.spec().dataset_dir(), "now has " + std::to_string(ds->NumViews()) + " views, the job " +
+                                                     std::to_string(m.views_size()));
+      spdlog::info("ingest: resuming job {} ({} views)", id, ds->NumViews());
+      spoolers.emplace_back(Spool, std::ref(context), std::cref(o), std::cref(store), id, ds, true);
+    } catch (const std::exception& ex) {  // the job fails with the reason, it does not wait for ever
+      spdlog::error("ingest: cannot resume job {}: {}", id, ex.what());
+      const std::string why = std::string("ingest restarted and cannot resume the job: ") + ex.what();
+      spoolers.emplace_back([&context, &o, &store, id, why] {
+        RequestClient to(context, o.aggregate, o.max_message_bytes, o.to_aggregate);
+        pb::Envelope env = NewEnvelope(id);
+        env.mutable_ingest_failed()->set_message(why);
+        Notify(to, env, store, id);
+      });
+    }
+  }
   spdlog::info("ingest: serving on {} (store {}, aggregator {})", o.endpoint, store.root().string(), o.aggregate);
   while (!StopRequested()) {
     auto in = server.Receive(std::chrono::milliseconds(200));
@@ -110,7 +147,7 @@ int Serve(const IngestOptions& o) {
         created.mutable_job_created()->set_num_views(ds->NumViews());
         if (!agg.Request(created, std::chrono::milliseconds(5000)))
           spdlog::warn("ingest: aggregator {} did not answer; it will find job {} in the store", o.aggregate, id);
-        spoolers.emplace_back(Spool, std::ref(context), std::cref(o), std::cref(store), id, ds);
+        spoolers.emplace_back(Spool, std::ref(context), std::cref(o), std::cref(store), id, ds, false);
         spdlog::info("ingest: job {}: {} views ({}, V from {})", id, ds->NumViews(), ds->pose_source(), ds->bbox_source());
         reply = NewEnvelope(id);
         reply.mutable_submit_reply()->set_job_id(id);
@@ -155,6 +192,7 @@ int main(int argc, char** argv) {
   app.add_option("--bind", o.endpoint, "ZeroMQ endpoint to bind (default: $LFRECON_INGEST or loopback)")->capture_default_str();
   app.add_option("--aggregate", o.aggregate, "The aggregator's endpoint")->capture_default_str();
   app.add_option("--store", store, "Job store folder")->required();
+  app.add_option("--frame-delay-ms", o.frame_delay_ms, "Fault injection (tests): pause after each spooled frame");
   app.add_option("--max-message-mb", max_mb, "Largest message accepted or sent, MiB")->capture_default_str();
   app.add_flag("-v,--verbose", verbosity, "More logging");
   CLI11_PARSE(app, argc, argv);

@@ -1,0 +1,503 @@
+// Faults the streaming service must survive (issue 15's table): results that
+// do not match their lease, failing workers, results over the size limit, a
+// second aggregator on a store, a stored map lost in a crash, a full disk,
+// ingest killed mid-job. Real daemon processes over ipc:// sockets in a
+// temporary folder, on a small synthetic job.
+#include <fcntl.h>
+#include <signal.h>
+#include <sys/mount.h>
+#include <sys/prctl.h>
+#include <sys/resource.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <gtest/gtest.h>
+
+#include <chrono>
+#include <cstdio>
+#include <cstdlib>
+#include <fstream>
+#include <memory>
+#include <optional>
+#include <sstream>
+#include <thread>
+
+#include "common/job_store.h"
+#include "common/messaging.h"
+#include "common/test_util.h"
+#include "io/dataset.h"
+
+namespace lfrecon::svc {
+namespace {
+namespace fs = std::filesystem;
+using std::chrono::milliseconds;
+
+const std::string kBin = std::string(LFRECON_BINARY_DIR) + "/bin/";
+
+// A daemon; SIGKILLed and reaped on destruction, and killed by the kernel if
+// the test dies. `max_file_bytes` > 0: RLIMIT_FSIZE of the process (writes
+// beyond it fail with EFBIG; SIGXFSZ is ignored).
+class Process {
+ public:
+  Process(const std::vector<std::string>& args, const fs::path& log, long max_file_bytes = 0) : log_(log) {
+    pid_ = ::fork();
+    if (pid_ == 0) {
+      ::prctl(PR_SET_PDEATHSIG, SIGKILL);
+      const int fd = ::open(log.c_str(), O_WRONLY | O_CREAT | O_APPEND, 0644);
+      ::dup2(fd, 1);
+      ::dup2(fd, 2);
+      if (max_file_bytes > 0) {
+        ::signal(SIGXFSZ, SIG_IGN);
+        const rlimit limit{static_cast<rlim_t>(max_file_bytes), static_cast<rlim_t>(max_file_bytes)};
+        ::setrlimit(RLIMIT_FSIZE, &limit);
+      }
+      std::vector<char*> argv;
+      for (const auto& a : args) argv.push_back(const_cast<char*>(a.c_str()));
+      argv.push_back(nullptr);
+      ::execv(argv[0], argv.data());
+      ::_exit(127);
+    }
+  }
+  ~Process() { Kill(SIGKILL); }
+  Process(const Process&) = delete;
+  void Kill(int sig) {
+    if (pid_ <= 0) return;
+    ::kill(pid_, sig);
+    int status;
+    ::waitpid(pid_, &status, 0);
+    pid_ = -1;
+  }
+  int Stop() {
+    if (pid_ <= 0) return exit_code_;
+    ::kill(pid_, SIGTERM);
+    return Wait(5.0);
+  }
+  // Waits up to `seconds` for the process to exit: its exit code, or -1 (then it is killed).
+  int Wait(double seconds) {
+    if (pid_ <= 0) return exit_code_;
+    for (int i = 0; i < seconds * 50; ++i) {
+      int status;
+      if (::waitpid(pid_, &status, WNOHANG) == pid_) {
+        pid_ = -1;
+        return exit_code_ = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+      }
+      std::this_thread::sleep_for(milliseconds(20));
+    }
+    Kill(SIGKILL);
+    return -1;
+  }
+  bool Running() const { return pid_ > 0 && ::waitpid(pid_, nullptr, WNOHANG) == 0; }
+  const fs::path& log() const { return log_; }
+
+ private:
+  pid_t pid_ = -1;
+  int exit_code_ = -1;
+  fs::path log_;
+};
+
+std::string ReadAll(const fs::path& p) {
+  std::ifstream f(p);
+  std::stringstream ss;
+  ss << f.rdbuf();
+  return ss.str();
+}
+
+fs::path g_dataset;  // one synthetic dataset for every test
+fs::path g_dataset_root;
+int g_views = 0;
+
+// Files under `dir` whose name marks a temporary file of the store.
+int TempFiles(const fs::path& dir) {
+  int n = 0;
+  std::error_code ec;
+  for (const auto& e : fs::recursive_directory_iterator(dir, ec))
+    n += e.path().filename().string().find(".tmp") != std::string::npos;
+  return n;
+}
+
+class FaultsTest : public ::testing::Test {
+ protected:
+  static void SetUpTestSuite() {
+    g_dataset_root = fs::temp_directory_path() / ("lfrecon_faults_" + std::to_string(::getpid()));
+    fs::remove_all(g_dataset_root);
+    fs::create_directories(g_dataset_root);
+    g_dataset = g_dataset_root / "dataset";
+    const std::string cmd = kBin + "lfrecon -q synth --scene sphere --frames 90 --width 96 --height 54 --out " +
+                            g_dataset.string();
+    ASSERT_EQ(std::system(cmd.c_str()), 0) << cmd;
+    DatasetOptions d;
+    d.dataset_dir = g_dataset;
+    g_views = Dataset::Open(d).NumViews();
+  }
+  static void TearDownTestSuite() { fs::remove_all(g_dataset_root); }
+
+  void SetUp() override {
+    tmp_ = std::make_unique<lfrecon::testing::TempDir>();
+    store_ = tmp_->path() / "store";
+    fs::create_directories(store_);
+    agg_ = "ipc://" + (tmp_->path() / "agg.sock").string();
+    ing_ = "ipc://" + (tmp_->path() / "ing.sock").string();
+    client_ = std::make_unique<RequestClient>(context_, agg_);
+  }
+  void TearDown() override {
+    if (HasFailure())
+      for (const auto& p : procs_) {
+        const std::string log = ReadAll(p->log());
+        std::printf("---- %s ----\n%s\n", p->log().c_str(), log.substr(log.size() > 4000 ? log.size() - 4000 : 0).c_str());
+      }
+    procs_.clear();
+    client_.reset();
+    if (mounted_) ::umount2(store_.c_str(), MNT_DETACH);
+  }
+
+  Process* Start(const std::string& exe, std::vector<std::string> args, long max_file_bytes = 0) {
+    args.insert(args.begin(), kBin + exe);
+    const fs::path log = tmp_->path() / (exe + "_" + std::to_string(procs_.size()) + ".log");
+    procs_.push_back(std::make_unique<Process>(args, log, max_file_bytes));
+    return procs_.back().get();
+  }
+  Process* StartAggregator(std::vector<std::string> extra = {}, long max_file_bytes = 0) {
+    std::vector<std::string> a = {"--bind", agg_, "--store", store_.string()};
+    a.insert(a.end(), extra.begin(), extra.end());
+    Process* p = Start("lfrecon-aggregate", a, max_file_bytes);
+    client_ = std::make_unique<RequestClient>(context_, agg_);
+    return p;
+  }
+  Process* StartIngest(std::vector<std::string> extra = {}) {
+    std::vector<std::string> a = {"--bind", ing_, "--aggregate", agg_, "--store", store_.string()};
+    a.insert(a.end(), extra.begin(), extra.end());
+    return Start("lfrecon-ingest", a);
+  }
+  Process* StartWorker(const std::string& exe, std::vector<std::string> extra = {}) {
+    std::vector<std::string> a = {"--aggregate", agg_, "--store", store_.string()};
+    a.insert(a.end(), extra.begin(), extra.end());
+    return Start(exe, a);
+  }
+
+  std::optional<pb::Envelope> Ask(pb::Envelope req, int timeout_ms = 5000) {
+    return client_->Request(req, milliseconds(timeout_ms));
+  }
+  bool Ping(const std::string& endpoint) {
+    RequestClient c(context_, endpoint);
+    pb::Envelope p = NewEnvelope();
+    p.mutable_ping();
+    auto r = c.Request(p, milliseconds(3000));
+    return r && r->has_pong();
+  }
+  std::string Submit(const std::string& extra = "") {
+    const std::string cmd = kBin + "lfrecon -q submit --ingest " + ing_ + " --dataset " + g_dataset.string() +
+                            " --voxel-mm 8" + extra;
+    FILE* p = ::popen(cmd.c_str(), "r");
+    std::string out;
+    char buf[256];
+    while (std::fgets(buf, sizeof(buf), p)) out += buf;
+    EXPECT_EQ(::pclose(p), 0) << cmd << "\n" << out;
+    out.erase(out.find_last_not_of("\n") + 1);
+    EXPECT_TRUE(JobStore::ValidJobId(out)) << out;
+    return out;
+  }
+  pb::JobStatus Status(const std::string& job) {
+    pb::Envelope req = NewEnvelope(job);
+    req.mutable_status();
+    auto r = Ask(req);
+    return r && r->has_job_status() ? r->job_status() : pb::JobStatus();
+  }
+  // Polls until `pred` holds (true) or `timeout_s` passes (false).
+  template <typename Pred>
+  bool WaitFor(const std::string& job, Pred pred, double timeout_s, pb::JobStatus* last) {
+    const auto t0 = std::chrono::steady_clock::now();
+    while (std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count() < timeout_s) {
+      pb::Envelope req = NewEnvelope(job);
+      req.mutable_status();
+      auto r = client_->Request(req, milliseconds(2000));
+      if (r && r->has_job_status()) {
+        *last = r->job_status();
+        if (pred(*last)) return true;
+      }
+      std::this_thread::sleep_for(milliseconds(50));
+    }
+    return false;
+  }
+  pb::JobStatus WaitEnded(const std::string& job, double timeout_s = 180) {
+    pb::JobStatus s;
+    const bool ended = WaitFor(
+        job,
+        [](const pb::JobStatus& st) {
+          return st.state() == pb::STATE_DONE || st.state() == pb::STATE_FAILED || st.state() == pb::STATE_CANCELLED;
+        },
+        timeout_s, &s);
+    EXPECT_TRUE(ended) << "job " << job << " still " << pb::JobState_Name(s.state()) << " after " << timeout_s
+                       << " s: " << s.views_fused() << "/" << s.num_views() << " fused, " << s.message();
+    return s;
+  }
+
+  // A job written into the store as ingest would, frames spooled and announced: the test plays ingest.
+  std::string CreateJobWithFrames(pb::JobSpec spec) {
+    JobStore store(store_);
+    spec.set_dataset_dir(g_dataset.string());
+    const Dataset ds = Dataset::Open(ToDatasetOptions(spec));
+    const std::string job = store.CreateJob();
+    store.WriteManifest(MakeManifest(job, spec, ds));
+    auto frames = ds.OpenFrames();
+    Frame f;
+    for (int k = 0; frames->Next(&f); ++k) {
+      store.WriteFrame(job, FrameToProto(k, f.image, CameraToProto(ds.View(k), ds.views()[k].name)));
+      pb::Envelope env = NewEnvelope(job);
+      env.mutable_frame_spooled()->set_index(k);
+      EXPECT_TRUE(Ask(env).has_value());
+    }
+    return job;
+  }
+
+  zmq::context_t context_{1};
+  std::unique_ptr<lfrecon::testing::TempDir> tmp_;
+  fs::path store_;
+  std::string agg_, ing_;
+  std::unique_ptr<RequestClient> client_;
+  std::vector<std::unique_ptr<Process>> procs_;
+  bool mounted_ = false;
+};
+
+pb::Envelope Result(const std::string& job, pb::Stage stage, int view, const std::string& worker, int map_view,
+                    int width, int height) {
+  pb::Envelope env = NewEnvelope(job);
+  pb::TaskResult* r = env.mutable_task_result();
+  r->set_stage(stage);
+  r->set_view(view);
+  r->set_worker(worker);
+  DepthMap map(height, width);
+  map.depth.setTo(1.0f);
+  *r->mutable_map() = DepthMapToProto(map, map_view, stage == pb::STAGE_DEPTH ? pb::MAP_SPARSE : pb::MAP_DENSE);
+  return env;
+}
+
+// A TaskResult for view v whose depth map says view 999 was stored as
+// sparse/000999.pb; results from a worker that holds no lease were taken too
+// (and one `error` from anyone failed the job). Each must match its lease.
+TEST_F(FaultsTest, ResultMustMatchItsLease) {
+  StartAggregator();
+  const std::string job = CreateJobWithFrames(pb::JobSpec());
+  pb::Envelope tr = NewEnvelope();
+  tr.mutable_task_request()->set_stage(pb::STAGE_DEPTH);
+  tr.mutable_task_request()->set_worker("w1");
+  auto task = Ask(tr);
+  ASSERT_TRUE(task && task->has_task()) << (task && task->has_error() ? task->error().message() : "");
+  const int v = static_cast<int>(task->task().view());
+  const int w = 96, h = 54;
+  auto expect_refused = [&](const pb::Envelope& env, const std::string& needle) {
+    auto r = Ask(env);
+    ASSERT_TRUE(r.has_value());
+    ASSERT_TRUE(r->has_error()) << needle << ": accepted";
+    EXPECT_EQ(r->error().code(), pb::ERROR_BAD_REQUEST);
+    EXPECT_NE(r->error().message().find(needle), std::string::npos) << r->error().message();
+  };
+  expect_refused(Result(job, pb::STAGE_DEPTH, v, "w1", 999, w, h), "says view 999");
+  expect_refused(Result(job, pb::STAGE_DEPTH, v, "intruder", v, w, h), "not leased to 'intruder'");
+  expect_refused(Result(job, pb::STAGE_DEPTH, v + 1, "w1", v + 1, w, h), "not leased");
+  expect_refused(Result(job, pb::STAGE_PROPAGATE, v, "w1", v, w, h), "not leased");
+  expect_refused(Result(job, pb::STAGE_DEPTH, v, "w1", v, w / 2, h), "48x54");
+  pb::Envelope forged_error = Result(job, pb::STAGE_DEPTH, v, "intruder", v, w, h);
+  forged_error.mutable_task_result()->set_error("forged");
+  expect_refused(forged_error, "not leased");
+  EXPECT_FALSE(fs::exists(store_ / job / "sparse" / "000999.pb"));
+  EXPECT_EQ(Status(job).sparse_done(), 0u);
+  EXPECT_NE(Status(job).state(), pb::STATE_FAILED);
+  // The leased worker's own result is taken.
+  auto ok = Ask(Result(job, pb::STAGE_DEPTH, v, "w1", v, w, h));
+  ASSERT_TRUE(ok && ok->has_ack()) << (ok && ok->has_error() ? ok->error().message() : "");
+  EXPECT_EQ(Status(job).sparse_done(), 1u);
+  EXPECT_TRUE(JobStore(store_).HasMap(job, pb::MAP_SPARSE, v));
+}
+
+// A worker error result used to fail the job at once: the view is retried on
+// another worker, and the job completes.
+TEST_F(FaultsTest, WorkerErrorIsRetriedOnAnotherWorker) {
+  StartAggregator();
+  StartIngest();
+  StartWorker("lfrecon-depth", {"--fail-tasks", "1000000"});  // fails every task
+  StartWorker("lfrecon-depth");
+  StartWorker("lfrecon-propagate", {"--fail-tasks", "2"});  // fails its first two
+  StartWorker("lfrecon-propagate");
+  const std::string job = Submit();
+  const pb::JobStatus s = WaitEnded(job);
+  EXPECT_EQ(s.state(), pb::STATE_DONE) << s.message();
+  EXPECT_EQ(s.views_fused(), static_cast<unsigned>(g_views));
+  EXPECT_GE(s.tasks_failed(), 3u);
+  std::printf("job done with %u failed tasks retried elsewhere\n", s.tasks_failed());
+}
+
+// Only a failing worker: the view is retried a bounded number of times, then the job fails with the reason.
+TEST_F(FaultsTest, TaskFailingEverywhereFailsTheJobAfterBoundedAttempts) {
+  StartAggregator({"--max-task-attempts", "3"});
+  StartIngest();
+  StartWorker("lfrecon-depth", {"--fail-tasks", "1000000"});
+  const std::string job = Submit();
+  const pb::JobStatus s = WaitEnded(job, 60);
+  EXPECT_EQ(s.state(), pb::STATE_FAILED);
+  EXPECT_NE(s.message().find("failed 3 times"), std::string::npos) << s.message();
+  EXPECT_NE(s.message().find("fault injection"), std::string::npos) << s.message();
+  EXPECT_EQ(s.tasks_failed(), 3u);
+}
+
+// An aggregator whose message limit is smaller than a result re-issued the
+// lease for ever (7343 times in 200 s): the job fails with the reason.
+TEST_F(FaultsTest, ResultOverTheSizeLimitFailsTheJob) {
+  StartAggregator({"--max-message-mb", "0.01", "--lease-ms", "2000"});  // 10 KiB; a 96x54 map is 47 KB
+  StartIngest();
+  StartWorker("lfrecon-depth");
+  StartWorker("lfrecon-propagate");
+  const auto t0 = std::chrono::steady_clock::now();
+  const std::string job = Submit();
+  const pb::JobStatus s = WaitEnded(job, 60);
+  std::printf("failed after %.1f s, %u failed tasks, %u leases expired\n",
+              std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count(), s.tasks_failed(),
+              s.leases_expired());
+  EXPECT_EQ(s.state(), pb::STATE_FAILED);
+  EXPECT_NE(s.message().find("exceeds the limit"), std::string::npos) << s.message();
+  EXPECT_LE(s.tasks_failed(), 3u);
+}
+
+// Two aggregators on one store served together, every view fused twice: the second refuses to start.
+TEST_F(FaultsTest, SecondAggregatorOnTheStoreRefusesToStart) {
+  Process* first = StartAggregator();
+  ASSERT_TRUE(Ping(agg_));
+  const std::string other = "ipc://" + (tmp_->path() / "agg2.sock").string();
+  Process* second = Start("lfrecon-aggregate", {"--bind", other, "--store", store_.string()});
+  EXPECT_EQ(second->Wait(10), 1);
+  EXPECT_NE(ReadAll(second->log()).find("another lfrecon-aggregate serves the job store"), std::string::npos)
+      << ReadAll(second->log());
+  EXPECT_TRUE(first->Running());
+  EXPECT_TRUE(Ping(agg_));
+  // The lock goes with the process, kill -9 included: a new aggregator starts.
+  first->Kill(SIGKILL);
+  Process* third = Start("lfrecon-aggregate", {"--bind", other, "--store", store_.string()});
+  EXPECT_TRUE(Ping(other));
+  EXPECT_TRUE(third->Running());
+}
+
+// kill -9 of the aggregator, one stored dense map left empty (what a power
+// loss leaves of an unsynced file): the job FAILED on restart. That view is
+// done again and the job completes.
+TEST_F(FaultsTest, EmptyStoredMapAfterCrashIsRedone) {
+  Process* agg = StartAggregator();
+  StartIngest();
+  StartWorker("lfrecon-depth");
+  StartWorker("lfrecon-propagate");
+  const std::string job = Submit();
+  pb::JobStatus s;
+  ASSERT_TRUE(WaitFor(job, [](const pb::JobStatus& st) { return st.views_fused() >= 10; }, 180, &s)) << s.message();
+  agg->Kill(SIGKILL);
+  JobStore store(store_);
+  const auto log = store.ReadText(job, "fused.log");
+  ASSERT_TRUE(log.has_value());
+  const int victim = std::stoi(*log);  // the first view fused
+  const fs::path map = store.MapPath(job, pb::MAP_DENSE, victim);
+  ASSERT_TRUE(fs::exists(map));
+  std::ofstream(map, std::ios::trunc).close();
+  ASSERT_EQ(fs::file_size(map), 0u);
+  StartAggregator();
+  s = WaitEnded(job);
+  EXPECT_EQ(s.state(), pb::STATE_DONE) << s.message();
+  EXPECT_EQ(s.views_fused(), static_cast<unsigned>(g_views));
+  EXPECT_GT(fs::file_size(map), 0u);  // done again
+  EXPECT_EQ(TempFiles(store_), 0);
+}
+
+// A job store on a full disk: endless retry every 30 ms, thousands of temp
+// files, job RUNNING. The job fails with the reason, no temporary file is
+// left, the daemons keep serving, a restart is clean.
+TEST_F(FaultsTest, FullDiskFailsTheJobCleanly) {
+  // A 6.7 MB tmpfs holds the 90 frames (64 KiB each) and ~20 depth maps; where
+  // mounting is not allowed, RLIMIT_FSIZE makes every map write fail (EFBIG) instead.
+  mounted_ = ::mount("tmpfs", store_.c_str(), "tmpfs", 0, "size=6800k") == 0;
+  const long max_file = mounted_ ? 0 : 20000;
+  std::printf("full disk simulated by %s\n", mounted_ ? "a 6.7 MB tmpfs" : "RLIMIT_FSIZE 20000 on the aggregator");
+  Process* agg = StartAggregator({}, max_file);
+  Process* ing = StartIngest();
+  StartWorker("lfrecon-depth");
+  StartWorker("lfrecon-propagate");
+  const std::string job = Submit();
+  const pb::JobStatus s = WaitEnded(job, 120);
+  EXPECT_EQ(s.state(), pb::STATE_FAILED);
+  const std::string reason = mounted_ ? "No space left on device" : "File too large";
+  EXPECT_NE(s.message().find(reason), std::string::npos) << s.message();
+  std::this_thread::sleep_for(milliseconds(500));
+  EXPECT_EQ(TempFiles(store_), 0);
+  EXPECT_TRUE(agg->Running());
+  EXPECT_TRUE(ing->Running());
+  EXPECT_TRUE(Ping(agg_));
+  EXPECT_TRUE(Ping(ing_));
+  // Restart: the job stays failed (or fails again the same way), nothing is left behind.
+  EXPECT_EQ(agg->Stop(), 0);
+  StartAggregator({}, max_file);
+  const pb::JobStatus again = WaitEnded(job, 60);
+  EXPECT_EQ(again.state(), pb::STATE_FAILED);
+  EXPECT_EQ(TempFiles(store_), 0);
+}
+
+// kill -9 of ingest mid-job, restart: the job waited INGESTING for ever. It
+// resumes (the frames already spooled are kept) and completes.
+TEST_F(FaultsTest, IngestKilledMidJobResumesOnRestart) {
+  StartAggregator();
+  Process* ing = StartIngest({"--frame-delay-ms", "60"});
+  StartWorker("lfrecon-depth");
+  StartWorker("lfrecon-propagate");
+  const std::string job = Submit();
+  pb::JobStatus s;
+  ASSERT_TRUE(WaitFor(job, [](const pb::JobStatus& st) { return st.frames_spooled() >= 20; }, 60, &s));
+  ing->Kill(SIGKILL);
+  const fs::path frame0 = JobStore(store_).FramePath(job, 0);
+  const auto written = fs::last_write_time(frame0);
+  const int before = static_cast<int>(Status(job).frames_spooled());
+  EXPECT_LT(before, g_views);
+  StartIngest();
+  s = WaitEnded(job);
+  EXPECT_EQ(s.state(), pb::STATE_DONE) << s.message();
+  EXPECT_EQ(s.frames_spooled(), static_cast<unsigned>(g_views));
+  EXPECT_EQ(s.views_fused(), static_cast<unsigned>(g_views));
+  EXPECT_EQ(fs::last_write_time(frame0), written);  // kept, not spooled again
+  EXPECT_EQ(TempFiles(store_), 0);
+}
+
+// Ingest killed and never restarted: the job fails with the reason instead of waiting for ever.
+TEST_F(FaultsTest, IngestGoneForGoodFailsTheJob) {
+  StartAggregator({"--ingest-timeout-s", "2"});
+  Process* ing = StartIngest({"--frame-delay-ms", "100"});
+  const std::string job = Submit();
+  pb::JobStatus s;
+  ASSERT_TRUE(WaitFor(job, [](const pb::JobStatus& st) { return st.frames_spooled() >= 3; }, 30, &s));
+  ing->Kill(SIGKILL);
+  s = WaitEnded(job, 30);
+  EXPECT_EQ(s.state(), pb::STATE_FAILED);
+  EXPECT_NE(s.message().find("nothing from ingest"), std::string::npos) << s.message();
+}
+
+// Invalid job options: ingest refuses the submission (the CLI checks them
+// too); a job already in the store with such options fails with the reason
+// instead of answering ERROR_INTERNAL for ever.
+TEST_F(FaultsTest, InvalidJobOptionsAreRefusedOrFailTheJob) {
+  StartAggregator();
+  StartIngest();
+  RequestClient ingest(context_, ing_);
+  pb::Envelope sub = NewEnvelope();
+  sub.mutable_submit()->mutable_spec()->set_dataset_dir(g_dataset.string());
+  sub.mutable_submit()->mutable_spec()->mutable_options()->set_sigma_s(2);
+  auto r = ingest.Request(sub, milliseconds(10000));
+  ASSERT_TRUE(r && r->has_error());
+  EXPECT_EQ(r->error().code(), pb::ERROR_BAD_REQUEST);
+  EXPECT_NE(r->error().message().find("sigma_s"), std::string::npos) << r->error().message();
+  // Written by an older ingest that did not check.
+  JobStore store(store_);
+  pb::JobSpec spec;
+  spec.set_dataset_dir(g_dataset.string());
+  const Dataset ds = Dataset::Open(ToDatasetOptions(spec));
+  spec.mutable_options()->set_sigma_s(2);
+  const std::string job = store.CreateJob();
+  store.WriteManifest(MakeManifest(job, spec, ds));
+  const pb::JobStatus s = Status(job);
+  EXPECT_EQ(s.state(), pb::STATE_FAILED);
+  EXPECT_NE(s.message().find("sigma_s"), std::string::npos) << s.message();
+}
+
+}  // namespace
+}  // namespace lfrecon::svc
