@@ -85,7 +85,7 @@ struct Aggregator::Job {
 Aggregator::Aggregator(const AggregatorOptions& options) : options_(options), store_(options.store) {
   // One aggregator per store: a second one would lease and fuse every view again.
   try {
-    lock_ = std::make_unique<FileLock>(store_.root() / "aggregate.lock");
+    lock_ = std::make_unique<FileLock>(store_.root());  // the folder itself: no file in the store
   } catch (const std::runtime_error& e) {
     throw std::runtime_error("another lfrecon-aggregate serves the job store " + store_.root().string() + " (" +
                              e.what() + ")");

@@ -115,7 +115,7 @@ class Aggregator {
 
   AggregatorOptions options_;
   JobStore store_;
-  std::unique_ptr<FileLock> lock_;  // STORE/aggregate.lock: one aggregator per store
+  std::unique_ptr<FileLock> lock_;  // flock on the store folder: one aggregator per store
   std::map<std::string, Clock::time_point> seen_workers_[3];  // per stage: worker -> its last task request
   std::map<std::string, std::unique_ptr<Job>> jobs_;
 };

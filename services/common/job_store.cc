@@ -124,7 +124,10 @@ std::string ReadFileBytes(const fs::path& path) {
 }
 
 FileLock::FileLock(const fs::path& file) {
-  fd_ = ::open(file.c_str(), O_RDWR | O_CREAT | O_CLOEXEC, 0644);
+  std::error_code ec;
+  const bool dir = fs::is_directory(file, ec);
+  fd_ = dir ? ::open(file.c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC)
+            : ::open(file.c_str(), O_RDWR | O_CREAT | O_CLOEXEC, 0644);
   if (fd_ < 0) ThrowErrno(file, "cannot open lock file", errno);
   if (::flock(fd_, LOCK_EX | LOCK_NB) != 0) {
     const int err = errno;
@@ -134,7 +137,7 @@ FileLock::FileLock(const fs::path& file) {
     ThrowErrno(file, "cannot lock", err);
   }
   const std::string pid = std::to_string(::getpid()) + "\n";  // who holds it, for people
-  if (::ftruncate(fd_, 0) == 0) (void)!::write(fd_, pid.data(), pid.size());
+  if (!dir && ::ftruncate(fd_, 0) == 0) (void)!::write(fd_, pid.data(), pid.size());
 }
 
 FileLock::~FileLock() {

@@ -77,9 +77,9 @@ std::filesystem::path TempPathFor(const std::filesystem::path& path);
 void CommitFile(const std::filesystem::path& tmp, const std::filesystem::path& path);
 std::string ReadFileBytes(const std::filesystem::path& path);  // throws InputError
 
-// An exclusive flock(2) on `file` for the object's lifetime (the kernel drops
-// it when the process dies, kill -9 included). Throws std::runtime_error naming
-// the file if another process holds it.
+// An exclusive flock(2) on `file` (created if missing) or on a folder, for the
+// object's lifetime (the kernel drops it when the process dies, kill -9
+// included). Throws std::runtime_error naming it if another process holds it.
 class FileLock {
  public:
   explicit FileLock(const std::filesystem::path& file);
