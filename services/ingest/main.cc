@@ -94,8 +94,6 @@ void Spool(zmq::context_t& context, const IngestOptions& o, const JobStore& stor
 int Serve(const IngestOptions& o) {
   zmq::context_t context(1);
   JobStore store(o.store);
-  // One ingest per store: two would both resume (and spool) the same jobs.
-  FileLock lock(store.root() / "ingest.lock");
   RouterServer server(context, o.endpoint, o.max_message_bytes, o.security);
   RequestClient agg(context, o.aggregate, o.max_message_bytes, o.to_aggregate);
   std::list<std::thread> spoolers;
