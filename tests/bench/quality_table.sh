@@ -187,7 +187,7 @@ done
   echo "acc / comp: median distance reconstruction -> truth / observed truth -> reconstruction, capped at 10 mm."
   for set in "${SET_LIST[@]}"; do
     [[ -f "$OUT/$set.json" ]] || continue
-    jq -r '"- \(.set): \(if .synth_args then "lfrecon synth " + .synth_args else .dataset end); lfrecon run \(if .run_extra_args == "" then "(defaults)" else .run_extra_args end), tree at \(.commit)"' "$OUT/$set.json"
+    jq -r '"- \(.set): \(if .synth_args then "lfrecon synth " + .synth_args else .dataset end); lfrecon run \(if (.run_extra_args // "") == "" then "(defaults)" else .run_extra_args end), tree at \(.commit // "?")"' "$OUT/$set.json"
   done
 } >"$OUT/table.md"
 cat "$OUT/table.md"
