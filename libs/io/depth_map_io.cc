@@ -157,7 +157,9 @@ ExrHeader ReadExrHeader(const fs::path& path) {
   // The header (magic, version, attributes up to an empty name) is read from
   // at most the first 1 MiB; attribute sizes are checked against what is there.
   constexpr std::size_t kMaxHeaderBytes = 1 << 20;
-  std::string data(kMaxHeaderBytes, '\0');
+  std::error_code ec;
+  const auto file_size = fs::file_size(path, ec);
+  std::string data(ec ? kMaxHeaderBytes : std::min<std::size_t>(file_size, kMaxHeaderBytes), '\0');
   in.read(data.data(), static_cast<std::streamsize>(data.size()));
   data.resize(static_cast<std::size_t>(in.gcount()));
   std::size_t pos = 0;
