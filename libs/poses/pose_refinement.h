@@ -31,7 +31,7 @@ struct PoseRefinementOptions {
   // The anchored refinement may move a chained position by at most this.
   double max_anchor_correction_px = 0.75;
   // Tracks end after this many frames (the anchor's patch must still look alike).
-  int max_track_length = 15;
+  int max_track_length = 10;
   int min_track_length = 4;
   // Triangulated with the given poses: observations farther than this from
   // the point's projection, and points seen under less than this angle, are left out.

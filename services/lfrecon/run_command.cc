@@ -34,7 +34,7 @@ struct RunArgs {
   bool poisson = false;
   int color_views = 8;
   double sigma_s = 0;
-  bool refine_poses = false;
+  bool no_refine_poses = false;
 };
 
 // OUT/sparse_refined/: the refined poses as a COLMAP text model (undistorted cameras).
@@ -82,7 +82,7 @@ int RunPipeline(const RunArgs& args) {
                ds.root().empty() ? std::string("(explicit sources)") : ds.root().string(), ds.NumViews(),
                ds.pose_source(), ds.bbox_source());
   nlohmann::json pose_report;
-  if (args.refine_poses) {
+  if (!args.no_refine_poses) {
     // A pass over the frames before the pipeline's own: the poses every stage uses come from it.
     auto frames = ds.OpenFrames();
     const PoseRefinementResult pr = RefinePoses(*frames, views, PoseRefinementOptions{});
@@ -139,9 +139,10 @@ void AddRunCommand(CLI::App& root, int* exit_code) {
   cmd->add_flag("--no-densify", args->no_densify, "Fuse the filtered sparse maps without densification (§4)");
   cmd->add_option("--sigma-s", args->sigma_s,
                   "σ_s of the fusion's confidence model (eq. 12-13); default 0.15 for dense maps, 0.7 with --no-densify");
-  cmd->add_flag("--refine-poses", args->refine_poses,
-                "Refine the given poses against the frames first (corner tracks + bundle adjustment with a prior "
-                "around each given pose; OUT/sparse_refined/); for poses with SfM-sized errors");
+  cmd->add_flag("--no-refine-poses", args->no_refine_poses,
+                "Use the given poses as they are. By default they are first refined against the frames (corner "
+                "tracks + bundle adjustment with a prior around each given pose; OUT/sparse_refined/): poses with "
+                "the error of a good SfM solution otherwise halve the mesh's quality (docs/benchmarks.md)");
   cmd->add_option("--color-views", args->color_views, "Frames kept to colour the mesh (0: none)")->capture_default_str();
   cmd->callback([args, exit_code] { *exit_code = RunPipeline(*args); });
 }
