@@ -888,8 +888,15 @@ void Aggregator::Serve() {
       Deferred deferred;
       reply = Handle(in->envelope, &deferred);
       if (deferred.work) {
-        lanes[deferred.lane == Lane::kRefine ? 1 : 0].pending.push_back({std::move(*in), std::move(deferred.work)});
-        continue;
+        LaneQueue& q = lanes[deferred.lane == Lane::kRefine ? 1 : 0];
+        if (static_cast<int>(q.pending.size()) < options_.max_queued_exports) {
+          q.pending.push_back({std::move(*in), std::move(deferred.work)});
+          continue;
+        }
+        reply = ErrorEnvelope(pb::ERROR_BUSY,
+                              std::to_string(q.pending.size()) + " exports are queued (--max-queued-exports " +
+                                  std::to_string(options_.max_queued_exports) + "); ask again later",
+                              in->envelope.job_id());
       }
     }
     server.Reply(*in, reply);

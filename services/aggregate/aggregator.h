@@ -58,6 +58,8 @@ struct AggregatorOptions {
   // A job still ingesting that has heard nothing from ingest for this long
   // fails (ingest died and did not come back to resume it).
   double ingest_timeout_s = 600;
+  // Exports waiting (plus the one running) per lane, plain and refined; more are refused (ERROR_BUSY).
+  int max_queued_exports = 8;
   // Fault injection for the integration tests: each view's integration holds
   // the grid this much longer (slow fusion, as a big grid has). 0: off.
   int fusion_delay_ms = 0;

@@ -34,13 +34,16 @@ int main(int argc, char** argv) {
   app.add_option("--ingest-timeout-s", o.ingest_timeout_s,
                  "A job still ingesting that has heard nothing from ingest for this long fails")
       ->capture_default_str();
+  app.add_option("--max-queued-exports", o.max_queued_exports,
+                 "Exports queued per lane (plain, refined); more are refused (ERROR_BUSY)")
+      ->capture_default_str();
   app.add_flag("-v,--verbose", verbosity, "More logging");
   CLI11_PARSE(app, argc, argv);
   lfrecon::SetupLogging(verbosity);
   o.store = store;
   o.max_message_bytes = static_cast<std::int64_t>(max_mb * 1048576.0);
   if (o.lease_ms < 1 || o.max_message_bytes < 1024 || o.fusion_delay_ms < 0 || o.max_task_attempts < 1 ||
-      !(o.ingest_timeout_s > 0)) {
+      !(o.ingest_timeout_s > 0) || o.max_queued_exports < 1) {
     std::cerr << "lfrecon-aggregate: --lease-ms must be >= 1, --max-message-mb >= 0.001, --fusion-delay-ms >= 0, "
                  "--max-task-attempts >= 1 and --ingest-timeout-s > 0\n";
     return 2;

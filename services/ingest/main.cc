@@ -7,8 +7,11 @@
 #include <spdlog/spdlog.h>
 
 #include <CLI/CLI.hpp>
+#include <atomic>
+#include <functional>
 #include <iostream>
 #include <list>
+#include <memory>
 #include <thread>
 
 #include "common/job_store.h"
@@ -28,6 +31,11 @@ struct IngestOptions {
   std::filesystem::path store;
   std::int64_t max_message_bytes = kDefaultMaxMessageBytes;
   int frame_delay_ms = 0;  // fault injection (tests): a pause after each spooled frame
+  // Bounds (deploy/README.md "Bounds"): jobs not ended in the store, jobs
+  // spooling at once (one thread each), and the store bytes one job may take.
+  int max_jobs = 16;
+  int max_ingest_threads = 4;
+  double job_quota_gb = 100;
   ServerSecurity security;      // of the bound socket
   ClientSecurity to_aggregate;  // of the connections to the aggregator (the same key, role ingest)
 };
@@ -91,12 +99,51 @@ void Spool(zmq::context_t& context, const IngestOptions& o, const JobStore& stor
   }
 }
 
+// A submission refused for now (a bound is reached).
+struct Busy : std::runtime_error {
+  using std::runtime_error::runtime_error;
+};
+
+// Jobs in the store that have not ended (no status.pb).
+int UnfinishedJobs(const JobStore& store) {
+  int n = 0;
+  std::error_code ec;
+  for (const auto& e : std::filesystem::directory_iterator(store.root(), ec)) {
+    const std::string id = e.path().filename().string();
+    n += store.Exists(id) && !std::filesystem::exists(e.path() / "status.pb");
+  }
+  return n;
+}
+
 int Serve(const IngestOptions& o) {
   zmq::context_t context(1);
   JobStore store(o.store);
   RouterServer server(context, o.endpoint, o.max_message_bytes, o.security);
   RequestClient agg(context, o.aggregate, o.max_message_bytes, o.to_aggregate);
-  std::list<std::thread> spoolers;
+  // One thread per job being spooled; finished ones are joined as they end.
+  struct Spooler {
+    std::thread thread;
+    std::shared_ptr<std::atomic<bool>> done;
+  };
+  std::list<Spooler> spoolers;
+  auto start = [&spoolers](std::function<void()> work) {
+    auto done = std::make_shared<std::atomic<bool>>(false);
+    spoolers.push_back({std::thread([work = std::move(work), done] {
+                          work();
+                          *done = true;
+                        }),
+                        done});
+  };
+  auto reap = [&spoolers] {
+    for (auto it = spoolers.begin(); it != spoolers.end();) {
+      if (!*it->done) {
+        ++it;
+        continue;
+      }
+      it->thread.join();
+      it = spoolers.erase(it);
+    }
+  };
   // Jobs a killed ingest left unfinished (no ingest.done, not ended): spooled on from where they stopped.
   for (const auto& e : std::filesystem::directory_iterator(store.root())) {
     const std::string id = e.path().filename().string();
@@ -109,11 +156,11 @@ int Serve(const IngestOptions& o) {
         throw InputError(m.spec().dataset_dir(), "now has " + std::to_string(ds->NumViews()) + " views, the job " +
                                                      std::to_string(m.views_size()));
       spdlog::info("ingest: resuming job {} ({} views)", id, ds->NumViews());
-      spoolers.emplace_back(Spool, std::ref(context), std::cref(o), std::cref(store), id, ds, true);
+      start([&context, &o, &store, id, ds] { Spool(context, o, store, id, ds, true); });
     } catch (const std::exception& ex) {  // the job fails with the reason, it does not wait for ever
       spdlog::error("ingest: cannot resume job {}: {}", id, ex.what());
       const std::string why = std::string("ingest restarted and cannot resume the job: ") + ex.what();
-      spoolers.emplace_back([&context, &o, &store, id, why] {
+      start([&context, &o, &store, id, why] {
         RequestClient to(context, o.aggregate, o.max_message_bytes, o.to_aggregate);
         pb::Envelope env = NewEnvelope(id);
         env.mutable_ingest_failed()->set_message(why);
@@ -123,6 +170,7 @@ int Serve(const IngestOptions& o) {
   }
   spdlog::info("ingest: serving on {} (store {}, aggregator {})", o.endpoint, store.root().string(), o.aggregate);
   while (!StopRequested()) {
+    reap();
     auto in = server.Receive(std::chrono::milliseconds(200));
     if (!in) continue;
     pb::Envelope reply;
@@ -136,20 +184,38 @@ int Serve(const IngestOptions& o) {
     } else if (in->envelope.has_submit()) {
       const pb::JobSpec& spec = in->envelope.submit().spec();
       try {
+        if (static_cast<int>(spoolers.size()) >= o.max_ingest_threads)
+          throw Busy(std::to_string(spoolers.size()) + " jobs are being spooled (--max-ingest-threads " +
+                     std::to_string(o.max_ingest_threads) + "); submit again later");
+        const int unfinished = UnfinishedJobs(store);
+        if (unfinished >= o.max_jobs)
+          throw Busy(std::to_string(unfinished) + " jobs in the store have not ended (--max-jobs " +
+                     std::to_string(o.max_jobs) + "); submit again later");
         auto ds = std::make_shared<Dataset>(Dataset::Open(ToDatasetOptions(spec)));
         // Every option validated (with V) before the job is accepted.
         JobFusionOptions(JobPipelineOptions(spec.options()), ds->bbox());
+        // Frames (12 bytes a pixel) and sparse and dense maps (9 each) in the store.
+        double bytes = 0;
+        for (int k = 0; k < ds->NumViews(); ++k)
+          bytes += 30.0 * ds->views()[k].camera.width * ds->views()[k].camera.height;
+        if (bytes > o.job_quota_gb * 1e9)
+          throw InputError(spec.dataset_dir().empty() ? spec.images_dir() + spec.video_path() : spec.dataset_dir(),
+                           "the job needs about " + std::to_string(static_cast<long>(bytes / 1e9 + 0.5)) +
+                               " GB in the job store, more than the per-job quota (--job-quota-gb " +
+                               std::to_string(o.job_quota_gb) + ")");
         const std::string id = store.CreateJob();
         store.WriteManifest(MakeManifest(id, spec, *ds));
         pb::Envelope created = NewEnvelope(id);
         created.mutable_job_created()->set_num_views(ds->NumViews());
         if (!agg.Request(created, std::chrono::milliseconds(5000)))
           spdlog::warn("ingest: aggregator {} did not answer; it will find job {} in the store", o.aggregate, id);
-        spoolers.emplace_back(Spool, std::ref(context), std::cref(o), std::cref(store), id, ds, false);
+        start([&context, &o, &store, id, ds] { Spool(context, o, store, id, ds, false); });
         spdlog::info("ingest: job {}: {} views ({}, V from {})", id, ds->NumViews(), ds->pose_source(), ds->bbox_source());
         reply = NewEnvelope(id);
         reply.mutable_submit_reply()->set_job_id(id);
         reply.mutable_submit_reply()->set_num_views(ds->NumViews());
+      } catch (const Busy& e) {
+        reply = ErrorEnvelope(pb::ERROR_BUSY, e.what());
       } catch (const InputError& e) {
         reply = ErrorEnvelope(pb::ERROR_INPUT, e.what());
       } catch (const OptionError& e) {
@@ -163,7 +229,7 @@ int Serve(const IngestOptions& o) {
     }
     server.Reply(*in, reply);
   }
-  for (auto& t : spoolers) t.join();
+  for (auto& s : spoolers) s.thread.join();
   spdlog::info("ingest: stopped");
   return 0;
 }
@@ -191,12 +257,24 @@ int main(int argc, char** argv) {
   app.add_option("--aggregate", o.aggregate, "The aggregator's endpoint")->capture_default_str();
   app.add_option("--store", store, "Job store folder")->required();
   app.add_option("--frame-delay-ms", o.frame_delay_ms, "Fault injection (tests): pause after each spooled frame");
+  app.add_option("--max-jobs", o.max_jobs, "Submissions are refused (ERROR_BUSY) while this many jobs have not ended")
+      ->capture_default_str();
+  app.add_option("--max-ingest-threads", o.max_ingest_threads,
+                 "Jobs spooled at once (a thread each); more submissions are refused (ERROR_BUSY)")
+      ->capture_default_str();
+  app.add_option("--job-quota-gb", o.job_quota_gb,
+                 "Largest job store footprint a job may have (frames and depth maps, estimated at submit)")
+      ->capture_default_str();
   app.add_option("--max-message-mb", max_mb, "Largest message accepted or sent, MiB")->capture_default_str();
   app.add_flag("-v,--verbose", verbosity, "More logging");
   CLI11_PARSE(app, argc, argv);
   lfrecon::SetupLogging(verbosity);
   o.store = store;
   o.max_message_bytes = static_cast<std::int64_t>(max_mb * 1048576.0);
+  if (o.max_jobs < 1 || o.max_ingest_threads < 1 || !(o.job_quota_gb > 0) || o.frame_delay_ms < 0) {
+    std::cerr << "lfrecon-ingest: --max-jobs and --max-ingest-threads must be >= 1, --job-quota-gb > 0\n";
+    return 2;
+  }
   try {
     // --key serves both sockets: with --allow the bound one is a CURVE server; with
     // --aggregate-key the connections to the aggregator are CURVE clients.

@@ -13,6 +13,7 @@
 
 #include <gtest/gtest.h>
 
+#include <atomic>
 #include <chrono>
 #include <cstdio>
 #include <cstdlib>
@@ -497,6 +498,82 @@ TEST_F(FaultsTest, InvalidJobOptionsAreRefusedOrFailTheJob) {
   const pb::JobStatus s = Status(job);
   EXPECT_EQ(s.state(), pb::STATE_FAILED);
   EXPECT_NE(s.message().find("sigma_s"), std::string::npos) << s.message();
+}
+
+// Bounds: jobs not ended in the store, jobs spooled at once, the store bytes
+// of one job, queued exports. Beyond them a request is refused (ERROR_BUSY, or
+// ERROR_INPUT for the quota) instead of piling up.
+TEST_F(FaultsTest, BoundsRefuseRequestsBeyondThem) {
+  StartAggregator({"--fusion-delay-ms", "3000", "--max-queued-exports", "1"});
+  Process* ing = StartIngest({"--max-jobs", "2", "--max-ingest-threads", "1", "--frame-delay-ms", "40"});
+  auto submit = [&](const std::string& endpoint) {
+    const std::string cmd = kBin + "lfrecon -q submit --ingest " + endpoint + " --dataset " + g_dataset.string() +
+                            " --voxel-mm 8 2>&1";
+    FILE* p = ::popen(cmd.c_str(), "r");
+    std::string out;
+    char buf[512];
+    while (std::fgets(buf, sizeof(buf), p)) out += buf;
+    const int status = ::pclose(p);
+    return std::make_pair(WIFEXITED(status) ? WEXITSTATUS(status) : -1, out);
+  };
+  const auto first = submit(ing_);
+  ASSERT_EQ(first.first, 0) << first.second;
+  std::string job = first.second;
+  job.erase(job.find_last_not_of("\n") + 1);
+  // While it is spooled (one ingest thread), a second job is refused.
+  const auto second = submit(ing_);
+  EXPECT_EQ(second.first, 1) << second.second;
+  EXPECT_NE(second.second.find("ERROR_BUSY"), std::string::npos) << second.second;
+  EXPECT_NE(second.second.find("--max-ingest-threads 1"), std::string::npos) << second.second;
+  // The first job spooled (no workers: it stays unfinished), a second is taken, a third is refused.
+  pb::JobStatus s;
+  ASSERT_TRUE(WaitFor(job, [](const pb::JobStatus& st) { return st.state() == pb::STATE_RUNNING; }, 60, &s));
+  std::this_thread::sleep_for(milliseconds(500));  // its spooling thread ends
+  const auto third = submit(ing_);
+  ASSERT_EQ(third.first, 0) << third.second;
+  std::string job3 = third.second;
+  job3.erase(job3.find_last_not_of("\n") + 1);
+  ASSERT_TRUE(WaitFor(job3, [](const pb::JobStatus& st) { return st.state() == pb::STATE_RUNNING; }, 60, &s));
+  std::this_thread::sleep_for(milliseconds(500));
+  const auto fourth = submit(ing_);
+  EXPECT_EQ(fourth.first, 1) << fourth.second;
+  EXPECT_NE(fourth.second.find("--max-jobs 2"), std::string::npos) << fourth.second;
+  EXPECT_TRUE(ing->Running());
+  // A per-job quota smaller than the job: refused at submit, naming the quota.
+  const std::string small = "ipc://" + (tmp_->path() / "ing_small.sock").string();
+  const fs::path store2 = tmp_->path() / "store2";
+  Start("lfrecon-ingest", {"--bind", small, "--aggregate", agg_, "--store", store2.string(), "--job-quota-gb", "0.01"});
+  const auto quota = submit(small);  // 90 frames of 96x54: ~14 MB
+  EXPECT_EQ(quota.first, 1) << quota.second;
+  EXPECT_NE(quota.second.find("per-job quota"), std::string::npos) << quota.second;
+  // Exports: one at a time per lane and at most --max-queued-exports waiting.
+  StartWorker("lfrecon-depth");
+  StartWorker("lfrecon-propagate");
+  ASSERT_TRUE(WaitFor(job, [](const pb::JobStatus& st) { return st.views_fused() >= 1; }, 120, &s));
+  bool busy_seen = false;
+  for (int attempt = 0; attempt < 5 && !busy_seen; ++attempt) {
+    std::atomic<bool> first_answered{false};
+    std::thread waiting([&] {  // waits for the grid, held 3 s by each view's integration
+      zmq::context_t ctx(1);
+      RequestClient c(ctx, agg_);
+      pb::Envelope ex = NewEnvelope(job);
+      ex.mutable_export_request();
+      c.Request(ex, milliseconds(20000));
+      first_answered = true;
+    });
+    std::this_thread::sleep_for(milliseconds(150));
+    pb::Envelope ex = NewEnvelope(job);
+    ex.mutable_export_request();
+    auto r = Ask(ex, 20000);
+    ASSERT_TRUE(r.has_value());
+    if (r->has_error() && !first_answered) {
+      EXPECT_EQ(r->error().code(), pb::ERROR_BUSY) << r->error().message();
+      EXPECT_NE(r->error().message().find("--max-queued-exports 1"), std::string::npos) << r->error().message();
+      busy_seen = true;
+    }
+    waiting.join();
+  }
+  EXPECT_TRUE(busy_seen);
 }
 
 }  // namespace
