@@ -217,7 +217,7 @@ pb::Envelope RefinedExportReply(const JobStore& store, RefineSnapshot snap) {
   const fs::path tmp = dir / ("export_refined_" + std::to_string(::getpid()) + ".ply");
   WritePly(mesh, tmp);
   rep->set_ply(ReadFileBytes(tmp));
-  if (snap.complete) fs::rename(tmp, cached);  // atomic: a reader sees all of it or nothing
+  if (snap.complete) CommitFile(tmp, cached);  // atomic and durable: a reader sees all of it or nothing
   else fs::remove(tmp);
   rep->set_vertices(mesh.vertices.size());
   rep->set_triangles(mesh.triangles.size());
@@ -428,11 +428,33 @@ void Aggregator::FusionLoop(Job* jp) const {
       std::vector<char> frame_ok(job.n, 0);
       for (int k = 0; k < job.n; ++k) frame_ok[k] = store_.HasFrame(id, k);
       const TriangleMesh raw = job.fusion->ExtractMesh(po.meshing);
-      WritePly(raw, dir / "mesh_raw.ply");
+      // Each output atomically and durably (temporary name, fsync, rename): DONE means they are whole.
+      auto write_ply = [&](const TriangleMesh& m, const fs::path& path) {
+        const fs::path tmp = TempPathFor(path);
+        try {
+          WritePly(m, tmp);
+        } catch (...) {
+          std::error_code ec;
+          fs::remove(tmp, ec);
+          throw;
+        }
+        CommitFile(tmp, path);
+      };
+      write_ply(raw, dir / "mesh_raw.ply");
       TriangleMesh mesh = raw;
       ColourMesh(store_, job.geo, frame_ok, &mesh);
-      WritePly(mesh, dir / "mesh.ply");
-      if (po.write_vdb) job.fusion->WriteVdb(dir / "grid.vdb");
+      write_ply(mesh, dir / "mesh.ply");
+      if (po.write_vdb) {
+        const fs::path tmp = TempPathFor(dir / "grid.vdb");
+        try {
+          job.fusion->WriteVdb(tmp);
+        } catch (...) {
+          std::error_code ec;
+          fs::remove(tmp, ec);
+          throw;
+        }
+        CommitFile(tmp, dir / "grid.vdb");
+      }
       job.triangles = static_cast<std::uint32_t>(mesh.triangles.size());
       job.seconds_outputs = t.Seconds();
       job.outcome = Job::kFinished;  // the serving thread marks the job DONE (Reap)
