@@ -134,7 +134,8 @@ class ServiceTest : public ::testing::Test {
     g_ref->dataset = g_ref->dir / "dataset";
     RunCommand(kBin + "lfrecon -q synth --scene sphere --frames 90 --width 96 --height 54 --out " +
                g_ref->dataset.string());
-    RunCommand(kBin + "lfrecon -q run --dataset " + g_ref->dataset.string() + " --voxel-mm " + std::to_string(kVoxelMm) +
+    // The service uses the poses as submitted (no pose refinement yet): compare with run without it.
+    RunCommand(kBin + "lfrecon -q run --dataset " + g_ref->dataset.string() + " --no-refine-poses --voxel-mm " + std::to_string(kVoxelMm) +
                " --out " + (g_ref->dir / "run").string());
     DatasetOptions d;
     d.dataset_dir = g_ref->dataset;
