@@ -16,6 +16,7 @@ PACKAGES=(
   libgtest-dev libgmock-dev libbenchmark-dev
   libopen3d-dev
   libzmq3-dev cppzmq-dev protobuf-compiler libprotobuf-dev
+  clang-14 libclang-rt-14-dev
   libceres-dev
 )
 

@@ -1,0 +1,27 @@
+#!/usr/bin/env bash
+# Tests under AddressSanitizer + UndefinedBehaviorSanitizer: a second build in
+# ${ASAN_BUILD_DIR:-build-asan} (g++, RelWithDebInfo, -fsanitize=address,undefined,
+# no UB recovery, benchmarks off), then ctest there. Any ASan report (out of
+# bounds, use after free, leaks at exit) or UB fails the test it happens in.
+# CI runs a subset (2 cores): ASAN_TESTS, a ctest regex, by default the unit
+# tests of the input readers and of the service (util, geometry, io, depth,
+# cli) and every integration and fuzz-corpus test; the integration tests run
+# the whole pipeline inside the sanitized daemons (ingest, depth, propagation,
+# fusion, export, refine). Only the libraries, daemons and test executables
+# of the subset are built. ASAN_TESTS=. builds and runs everything.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+BUILD="${ASAN_BUILD_DIR:-build-asan}"
+TESTS="${ASAN_TESTS:-^(util|geometry|io|depth|cli|integration|fuzz)_}"
+cmake -S . -B "$BUILD" -DCMAKE_BUILD_TYPE=RelWithDebInfo -DLFRECON_BUILD_BENCHMARKS=OFF \
+  "-DCMAKE_CXX_FLAGS=-fsanitize=address,undefined -fno-sanitize-recover=undefined -fno-omit-frame-pointer" \
+  >"$BUILD.configure.log" 2>&1 || { cat "$BUILD.configure.log"; exit 1; }
+# The test executables of the subset (a test's name is its executable's, or fuzz_X_corpus for fuzz_X_replay).
+targets=(lfrecon lfrecon-ingest lfrecon-aggregate lfrecon-depth lfrecon-propagate)
+while read -r t; do targets+=("$t"); done < <(cd "$BUILD" && ctest -N -R "$TESTS" | sed -n 's/^ *Test *#[0-9]*: //p' |
+  sed 's/^\(fuzz_.*\)_corpus$/\1_replay/')
+cmake --build "$BUILD" -j"${JOBS:-2}" --target "${targets[@]}"
+export ASAN_OPTIONS="${ASAN_OPTIONS:-detect_leaks=1:abort_on_error=1:strict_string_checks=1}"
+export UBSAN_OPTIONS="${UBSAN_OPTIONS:-print_stacktrace=1:halt_on_error=1}"
+cd "$BUILD"
+ctest --output-on-failure -j2 --timeout 1200 -R "$TESTS"
