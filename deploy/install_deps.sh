@@ -18,6 +18,7 @@ PACKAGES=(
   libzmq3-dev cppzmq-dev protobuf-compiler libprotobuf-dev
   clang-14 libclang-rt-14-dev
   libceres-dev
+  jq
 )
 
 missing=()
