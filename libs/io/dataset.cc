@@ -260,6 +260,16 @@ Dataset Dataset::Open(const DatasetOptions& options) {
     if (entries[i].name == entries[i - 1].name)
       throw InputError(pose_file, "'" + entries[i].name + "' has two poses");
 
+  // An image name is a path *inside* the image folder: absolute names and
+  // ".." components would let a pose file point the reader anywhere.
+  for (const PoseEntry& e : entries) {
+    const fs::path n(e.name);
+    bool escapes = n.is_absolute() || n.has_root_name() || n.has_root_directory();
+    for (const fs::path& part : n) escapes = escapes || part == "..";
+    if (escapes)
+      throw InputError(pose_file, "image name '" + e.name + "' leaves the image folder (absolute or '..')");
+  }
+
   if (ds.video_path_.empty()) {
     // Every pose needs its image; images without a pose are left out (COLMAP
     // often fails to register a few frames), with a warning.

@@ -36,9 +36,29 @@ struct IngestOptions {
   int max_jobs = 16;
   int max_ingest_threads = 4;
   double job_quota_gb = 100;
+  // Submitted paths must lie under one of these (canonical) folders; empty:
+  // anywhere this daemon can read (a warning at start).
+  std::vector<std::filesystem::path> data_roots;
   ServerSecurity security;      // of the bound socket
   ClientSecurity to_aggregate;  // of the connections to the aggregator (the same key, role ingest)
 };
+
+// Refuses a submitted path outside every --data-root (after resolving "..",
+// "." and symbolic links, so neither can leave a root). The message names
+// the field, not what the path holds.
+void CheckUnderDataRoots(const std::vector<std::filesystem::path>& roots, const std::string& field,
+                         const std::string& path) {
+  if (roots.empty() || path.empty()) return;
+  std::error_code ec;
+  const std::filesystem::path p = std::filesystem::weakly_canonical(std::filesystem::absolute(path), ec);
+  if (!ec)
+    for (const std::filesystem::path& root : roots) {
+      auto r = root.begin(), q = p.begin();
+      while (r != root.end() && q != p.end() && *r == *q) ++r, ++q;
+      if (r == root.end() || (std::next(r) == root.end() && r->empty())) return;
+    }
+  throw InputError(path, field + " is not under any --data-root of this ingest daemon");
+}
 
 // Sends `env` to the aggregator until it answers (or the daemon stops / the job is cancelled).
 bool Notify(RequestClient& client, const pb::Envelope& env, const JobStore& store, const std::string& id) {
@@ -191,6 +211,11 @@ int Serve(const IngestOptions& o) {
         if (unfinished >= o.max_jobs)
           throw Busy(std::to_string(unfinished) + " jobs in the store have not ended (--max-jobs " +
                      std::to_string(o.max_jobs) + "); submit again later");
+        CheckUnderDataRoots(o.data_roots, "dataset_dir", spec.dataset_dir());
+        CheckUnderDataRoots(o.data_roots, "images_dir", spec.images_dir());
+        CheckUnderDataRoots(o.data_roots, "video_path", spec.video_path());
+        CheckUnderDataRoots(o.data_roots, "colmap_dir", spec.colmap_dir());
+        CheckUnderDataRoots(o.data_roots, "transforms_path", spec.transforms_path());
         auto ds = std::make_shared<Dataset>(Dataset::Open(ToDatasetOptions(spec)));
         // Every option validated (with V) before the job is accepted.
         JobFusionOptions(JobPipelineOptions(spec.options()), ds->bbox());
@@ -256,6 +281,10 @@ int main(int argc, char** argv) {
   app.add_option("--bind", o.endpoint, "ZeroMQ endpoint to bind (default: $LFRECON_INGEST or loopback)")->capture_default_str();
   app.add_option("--aggregate", o.aggregate, "The aggregator's endpoint")->capture_default_str();
   app.add_option("--store", store, "Job store folder")->required();
+  std::vector<std::string> data_roots;
+  app.add_option("--data-root", data_roots,
+                 "Submitted datasets, images, videos and pose files must lie under this folder (repeatable; "
+                 "symbolic links and '..' resolved). Without it any path this daemon can read is accepted");
   app.add_option("--frame-delay-ms", o.frame_delay_ms, "Fault injection (tests): pause after each spooled frame");
   app.add_option("--max-jobs", o.max_jobs, "Submissions are refused (ERROR_BUSY) while this many jobs have not ended")
       ->capture_default_str();
@@ -270,6 +299,17 @@ int main(int argc, char** argv) {
   CLI11_PARSE(app, argc, argv);
   lfrecon::SetupLogging(verbosity);
   o.store = store;
+  for (const std::string& r : data_roots) {
+    std::error_code ec;
+    const std::filesystem::path root = std::filesystem::canonical(r, ec);
+    if (ec || !std::filesystem::is_directory(root)) {
+      std::cerr << "lfrecon-ingest: --data-root " << r << ": not a folder\n";
+      return 2;
+    }
+    o.data_roots.push_back(root);
+  }
+  if (o.data_roots.empty())
+    spdlog::warn("ingest: no --data-root: jobs may name any path this daemon can read");
   o.max_message_bytes = static_cast<std::int64_t>(max_mb * 1048576.0);
   if (o.max_jobs < 1 || o.max_ingest_threads < 1 || !(o.job_quota_gb > 0) || o.frame_delay_ms < 0) {
     std::cerr << "lfrecon-ingest: --max-jobs and --max-ingest-threads must be >= 1, --job-quota-gb > 0\n";

@@ -275,6 +275,39 @@ pb::Envelope Result(const std::string& job, pb::Stage stage, int view, const std
 // A TaskResult for view v whose depth map says view 999 was stored as
 // sparse/000999.pb; results from a worker that holds no lease were taken too
 // (and one `error` from anyone failed the job). Each must match its lease.
+// Ingest with --data-root serves only datasets under it; a path outside (also
+// through "..") is refused with ERROR_INPUT naming the field, and nothing of
+// the files is echoed.
+TEST_F(FaultsTest, IngestReadsOnlyUnderItsDataRoots) {
+  StartAggregator();
+  const fs::path root = g_dataset.parent_path();
+  const fs::path elsewhere = tmp_->path() / "elsewhere";
+  fs::create_directories(elsewhere);
+  Process* ing = StartIngest({"--data-root", elsewhere.string()});
+  auto submit = [&](const std::string& dataset) {
+    const std::string cmd = kBin + "lfrecon -q submit --ingest " + ing_ + " --dataset " + dataset + " 2>&1";
+    FILE* p = ::popen(cmd.c_str(), "r");
+    std::string out;
+    char buf[256];
+    while (std::fgets(buf, sizeof(buf), p)) out += buf;
+    return std::make_pair(WEXITSTATUS(::pclose(p)), out);
+  };
+  const auto outside = submit(g_dataset.string());
+  EXPECT_EQ(outside.first, 1) << outside.second;
+  EXPECT_NE(outside.second.find("not under any --data-root"), std::string::npos) << outside.second;
+  std::string up;
+  for (int k = 0; k < 32; ++k) up += "../";  // climbs to / from the root, then down to the dataset
+  const auto dotdot = submit((elsewhere / up).string() + g_dataset.relative_path().string());
+  EXPECT_EQ(dotdot.first, 1) << dotdot.second;
+  EXPECT_NE(dotdot.second.find("not under any --data-root"), std::string::npos) << dotdot.second;
+  EXPECT_TRUE(ing->Running());
+  // Under a root: accepted.
+  ing->Kill(SIGKILL);
+  StartIngest({"--data-root", elsewhere.string(), "--data-root", root.string()});
+  const auto inside = submit(g_dataset.string());
+  EXPECT_EQ(inside.first, 0) << inside.second;
+}
+
 TEST_F(FaultsTest, ResultMustMatchItsLease) {
   StartAggregator();
   const std::string job = CreateJobWithFrames(pb::JobSpec());

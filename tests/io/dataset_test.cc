@@ -288,6 +288,25 @@ TEST(Dataset, VideoFrames) {
 // ---------------------------------------------------------------------------
 // Bad input
 
+TEST(DatasetBadInput, ImageNamesThatLeaveTheImageFolderAreRefused) {
+  for (const std::string bad : {"../secret.png", "sub/../../secret.png", "/etc/secret.png"}) {
+    TempDir tmp;
+    Synthetic s = MakeSynthetic(3, SmallPinhole());
+    WriteImages(s, tmp.path() / "images");
+    s.model.images[1].name = bad;
+    WriteColmapModelText(s.model, tmp.path() / "sparse");
+    DatasetOptions options;
+    options.dataset_dir = tmp.path();
+    try {
+      Dataset::Open(options);
+      ADD_FAILURE() << bad << " was accepted";
+    } catch (const InputError& e) {
+      EXPECT_NE(std::string(e.what()).find("images.txt"), std::string::npos) << e.what();
+      EXPECT_NE(std::string(e.what()).find("leaves the image folder"), std::string::npos) << e.what();
+    }
+  }
+}
+
 TEST(DatasetBadInput, OptionsAndMissingFolders) {
   TempDir tmp;
   DatasetOptions options;
