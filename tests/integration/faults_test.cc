@@ -388,7 +388,10 @@ TEST_F(FaultsTest, ResultOverTheSizeLimitFailsTheJob) {
               s.leases_expired());
   EXPECT_EQ(s.state(), pb::STATE_FAILED);
   EXPECT_NE(s.message().find("exceeds the limit"), std::string::npos) << s.message();
-  EXPECT_LE(s.tasks_failed(), 3u);
+  // Bounded, not for ever: the job fails when the first view reaches its 3rd
+  // failed attempt; other views leased meanwhile may each have failed up to
+  // twice (how many depends on timing: 5 under ASan, 3 in a Release build).
+  EXPECT_LE(s.tasks_failed(), 3u + 2u * (static_cast<unsigned>(s.num_views()) - 1u));
 }
 
 // Two aggregators on one store served together, every view fused twice: the second refuses to start.
