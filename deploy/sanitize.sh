@@ -4,15 +4,16 @@
 # no UB recovery, benchmarks off), then ctest there. Any ASan report (out of
 # bounds, use after free, leaks at exit) or UB fails the test it happens in.
 # CI runs a subset (2 cores): ASAN_TESTS, a ctest regex, by default the unit
-# tests of the input readers and of the service (util, geometry, io, depth,
-# cli) and every integration and fuzz-corpus test; the integration tests run
+# tests of the input readers and of the service (util, geometry, io, cli) and
+# every integration and fuzz-corpus test (the depth tests, algorithm code on
+# generated data, take 140-205 s each under ASan and are left out); the integration tests run
 # the whole pipeline inside the sanitized daemons (ingest, depth, propagation,
 # fusion, export, refine). Only the libraries, daemons and test executables
 # of the subset are built. ASAN_TESTS=. builds and runs everything.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 BUILD="${ASAN_BUILD_DIR:-build-asan}"
-TESTS="${ASAN_TESTS:-^(util|geometry|io|depth|cli|integration|fuzz)_}"
+TESTS="${ASAN_TESTS:-^(util|geometry|io|cli|integration|fuzz)_}"
 cmake -S . -B "$BUILD" -DCMAKE_BUILD_TYPE=RelWithDebInfo -DLFRECON_BUILD_BENCHMARKS=OFF \
   "-DCMAKE_CXX_FLAGS=-fsanitize=address,undefined -fno-sanitize-recover=undefined -fno-omit-frame-pointer" \
   >"$BUILD.configure.log" 2>&1 || { cat "$BUILD.configure.log"; exit 1; }
