@@ -2,6 +2,7 @@
 
 #include <Eigen/LU>
 #include <cmath>
+#include <limits>
 #include <stdexcept>
 
 namespace lfrecon {
@@ -14,20 +15,27 @@ std::string CameraModelName(CameraModelId id) {
     case CameraModelId::kRadial: return "RADIAL";
     case CameraModelId::kOpenCV: return "OPENCV";
     case CameraModelId::kFullOpenCV: return "FULL_OPENCV";
+    case CameraModelId::kOpenCVFisheye: return "OPENCV_FISHEYE";
+    case CameraModelId::kFov: return "FOV";
+    case CameraModelId::kSimpleRadialFisheye: return "SIMPLE_RADIAL_FISHEYE";
+    case CameraModelId::kRadialFisheye: return "RADIAL_FISHEYE";
+    case CameraModelId::kThinPrismFisheye: return "THIN_PRISM_FISHEYE";
   }
   return "UNKNOWN";
 }
 
 CameraModelId CameraModelFromName(const std::string& name) {
-  for (CameraModelId id : {CameraModelId::kSimplePinhole, CameraModelId::kPinhole, CameraModelId::kSimpleRadial,
-                           CameraModelId::kRadial, CameraModelId::kOpenCV, CameraModelId::kFullOpenCV}) {
-    if (CameraModelName(id) == name) return id;
+  for (int id = 0; id <= 10; ++id) {
+    if (CameraModelName(static_cast<CameraModelId>(id)) == name) return static_cast<CameraModelId>(id);
   }
   throw std::invalid_argument("unsupported camera model '" + name +
-                              "' (supported: SIMPLE_PINHOLE, PINHOLE, SIMPLE_RADIAL, RADIAL, OPENCV, FULL_OPENCV)");
+                              "' (supported: SIMPLE_PINHOLE, PINHOLE, SIMPLE_RADIAL, RADIAL, OPENCV, "
+                              "OPENCV_FISHEYE, FULL_OPENCV, FOV, SIMPLE_RADIAL_FISHEYE, RADIAL_FISHEYE, "
+                              "THIN_PRISM_FISHEYE)");
 }
 
-bool IsSupportedCameraModelId(int id) { return (id >= 0 && id <= 4) || id == 6; }
+// COLMAP's ids 0-10; 11 (RAD_TAN_THIN_PRISM_FISHEYE) and later are not supported.
+bool IsSupportedCameraModelId(int id) { return id >= 0 && id <= 10; }
 
 int NumCameraParams(CameraModelId id) {
   switch (id) {
@@ -37,6 +45,11 @@ int NumCameraParams(CameraModelId id) {
     case CameraModelId::kRadial: return 5;
     case CameraModelId::kOpenCV: return 8;
     case CameraModelId::kFullOpenCV: return 12;
+    case CameraModelId::kOpenCVFisheye: return 8;
+    case CameraModelId::kFov: return 5;
+    case CameraModelId::kSimpleRadialFisheye: return 4;
+    case CameraModelId::kRadialFisheye: return 5;
+    case CameraModelId::kThinPrismFisheye: return 12;
   }
   return 0;
 }
@@ -57,7 +70,18 @@ Camera Camera::PinholeFromHfov(int width, int height, double hfov_deg) {
 
 namespace {
 bool SingleFocal(CameraModelId m) {
-  return m == CameraModelId::kSimplePinhole || m == CameraModelId::kSimpleRadial || m == CameraModelId::kRadial;
+  return m == CameraModelId::kSimplePinhole || m == CameraModelId::kSimpleRadial || m == CameraModelId::kRadial ||
+         m == CameraModelId::kSimpleRadialFisheye || m == CameraModelId::kRadialFisheye;
+}
+
+// The equidistant fisheye warp theta = atan(r) of COLMAP's fisheye models,
+// with theta_d = theta (1 + k1 theta^2 + k2 theta^4 + k3 theta^6 + k4 theta^8).
+Eigen::Vector2d FisheyeWarp(const Eigen::Vector2d& n, double k1, double k2, double k3, double k4) {
+  const double r = n.norm();
+  if (!(r > std::numeric_limits<double>::epsilon())) return n;
+  const double theta = std::atan(r), t2 = theta * theta, t4 = t2 * t2;
+  const double thetad = theta * (1.0 + k1 * t2 + k2 * t4 + k3 * t4 * t2 + k4 * t4 * t4);
+  return n * (thetad / r);
 }
 }  // namespace
 
@@ -67,10 +91,62 @@ double Camera::cx() const { return SingleFocal(model) ? params[1] : params[2]; }
 double Camera::cy() const { return SingleFocal(model) ? params[2] : params[3]; }
 
 bool Camera::HasDistortion() const {
+  // The fisheye models warp by theta = atan(r) even with zero coefficients.
+  if (model == CameraModelId::kOpenCVFisheye || model == CameraModelId::kSimpleRadialFisheye ||
+      model == CameraModelId::kRadialFisheye || model == CameraModelId::kThinPrismFisheye)
+    return true;
   const int first = SingleFocal(model) ? 3 : 4;
   for (size_t k = first; k < params.size(); ++k)
     if (params[k] != 0.0) return true;
   return false;
+}
+
+Camera Camera::Scaled(int new_width, int new_height) const {
+  if (new_width == width && new_height == height) return *this;
+  const double sx = static_cast<double>(new_width) / width, sy = static_cast<double>(new_height) / height;
+  Camera out = *this;
+  out.width = new_width;
+  out.height = new_height;
+  if (!SingleFocal(model)) {
+    out.params[0] *= sx;
+    out.params[1] *= sy;
+    out.params[2] *= sx;
+    out.params[3] *= sy;
+    return out;
+  }
+  if (sx == sy) {
+    out.params[0] *= sx;
+    out.params[1] *= sx;
+    out.params[2] *= sy;
+    return out;
+  }
+  // Two focal lengths needed: the equivalent two-focal model.
+  const std::vector<double>& p = params;
+  const double fx = p[0] * sx, fy = p[0] * sy, cx = p[1] * sx, cy = p[2] * sy;
+  switch (model) {
+    case CameraModelId::kSimplePinhole:
+      out.model = CameraModelId::kPinhole;
+      out.params = {fx, fy, cx, cy};
+      break;
+    case CameraModelId::kSimpleRadial:
+      out.model = CameraModelId::kOpenCV;
+      out.params = {fx, fy, cx, cy, p[3], 0, 0, 0};
+      break;
+    case CameraModelId::kRadial:
+      out.model = CameraModelId::kOpenCV;
+      out.params = {fx, fy, cx, cy, p[3], p[4], 0, 0};
+      break;
+    case CameraModelId::kSimpleRadialFisheye:
+      out.model = CameraModelId::kOpenCVFisheye;
+      out.params = {fx, fy, cx, cy, p[3], 0, 0, 0};
+      break;
+    case CameraModelId::kRadialFisheye:
+      out.model = CameraModelId::kOpenCVFisheye;
+      out.params = {fx, fy, cx, cy, p[3], p[4], 0, 0};
+      break;
+    default: break;
+  }
+  return out;
 }
 
 std::string Camera::Validate() const {
@@ -111,6 +187,34 @@ Eigen::Vector2d Camera::Distort(const Eigen::Vector2d& n) const {
       const double r4 = r2 * r2, r6 = r4 * r2;
       const double radial = (1.0 + k1 * r2 + k2 * r4 + k3 * r6) / (1.0 + k4 * r2 + k5 * r4 + k6 * r6);
       return {u * radial + 2 * p1 * uv + p2 * (r2 + 2 * u2), v * radial + 2 * p2 * uv + p1 * (r2 + 2 * v2)};
+    }
+    // The fisheye models and FOV as COLMAP writes them (src/colmap/camera/models.h).
+    case CameraModelId::kOpenCVFisheye: return FisheyeWarp(n, params[4], params[5], params[6], params[7]);
+    case CameraModelId::kSimpleRadialFisheye: return FisheyeWarp(n, params[3], 0, 0, 0);
+    case CameraModelId::kRadialFisheye: return FisheyeWarp(n, params[3], params[4], 0, 0);
+    case CameraModelId::kThinPrismFisheye: {
+      const Eigen::Vector2d w = FisheyeWarp(n, 0, 0, 0, 0);  // theta * n / r, then OpenCV-like terms
+      const double k1 = params[4], k2 = params[5], p1 = params[6], p2 = params[7];
+      const double k3 = params[8], k4 = params[9], sx1 = params[10], sy1 = params[11];
+      const double a = w.x(), b = w.y(), a2 = a * a, b2 = b * b, ab = a * b, q2 = a2 + b2, q4 = q2 * q2;
+      const double radial = k1 * q2 + k2 * q4 + k3 * q4 * q2 + k4 * q4 * q4;
+      return {a + a * radial + 2 * p1 * ab + p2 * (q2 + 2 * a2) + sx1 * q2,
+              b + b * radial + 2 * p2 * ab + p1 * (q2 + 2 * b2) + sy1 * q2};
+    }
+    case CameraModelId::kFov: {
+      const double omega = params[4], omega2 = omega * omega;
+      constexpr double kEpsilon = 1e-4;
+      double factor;
+      if (omega2 < kEpsilon) {
+        factor = (omega2 * r2) / 3.0 - omega2 / 12.0 + 1.0;
+      } else if (r2 < kEpsilon) {
+        const double t = std::tan(omega / 2.0);
+        factor = (-2.0 * t * (4.0 * r2 * t * t - 3.0)) / (3.0 * omega);
+      } else {
+        const double r = std::sqrt(r2);
+        factor = std::atan(r * 2.0 * std::tan(omega / 2.0)) / (r * omega);
+      }
+      return n * factor;
     }
   }
   return n;

@@ -16,8 +16,15 @@ enum class CameraModelId : int {
   kSimpleRadial = 2,   // f, cx, cy, k
   kRadial = 3,         // f, cx, cy, k1, k2
   kOpenCV = 4,         // fx, fy, cx, cy, k1, k2, p1, p2
+  kOpenCVFisheye = 5,  // fx, fy, cx, cy, k1, k2, k3, k4 (equidistant: theta_d = theta (1 + k1 theta^2 + ...))
   kFullOpenCV = 6,     // fx, fy, cx, cy, k1, k2, p1, p2, k3, k4, k5, k6
+  kFov = 7,            // fx, fy, cx, cy, omega
+  kSimpleRadialFisheye = 8,  // f, cx, cy, k
+  kRadialFisheye = 9,        // f, cx, cy, k1, k2
+  kThinPrismFisheye = 10,    // fx, fy, cx, cy, k1, k2, p1, p2, k3, k4, sx1, sy1
 };
+// Every model above is removed on ingest (Undistorter) to PINHOLE with the same
+// focal lengths and principal point, as COLMAP's image_undistorter does.
 
 // COLMAP's name ("PINHOLE", ...) and back. CameraModelFromName throws
 // std::invalid_argument for an unknown or unsupported name.
@@ -42,6 +49,13 @@ struct Camera {
   double cx() const;
   double cy() const;
   bool HasDistortion() const;
+  // The camera of the same image resized to new_width x new_height: focal
+  // lengths and principal point times new_width / width (x) and new_height /
+  // height (y) — with the upper-left pixel's centre at (0.5, 0.5) the image
+  // extent [0, W] maps onto [0, W'], so no half-pixel shift. Distortion
+  // (normalised coordinates) is unchanged; a single-focal model scaled by
+  // unequal factors becomes its two-focal form (PINHOLE, OPENCV, OPENCV_FISHEYE).
+  Camera Scaled(int new_width, int new_height) const;
   // Empty string when valid, else what is wrong (parameter count, sizes, non-finite values).
   std::string Validate() const;
 

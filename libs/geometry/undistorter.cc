@@ -1,5 +1,6 @@
 #include "geometry/undistorter.h"
 
+#include <opencv2/calib3d.hpp>
 #include <opencv2/imgproc.hpp>
 #include <stdexcept>
 
@@ -10,6 +11,25 @@ Undistorter::Undistorter(const Camera& distorted) : distorted_(distorted) {
                                  distorted.cy());
   identity_ = !distorted.HasDistortion();
   if (identity_) return;
+  // COLMAP's equidistant fisheye models are OpenCV's fisheye model (Kannala-Brandt,
+  // theta_d = theta (1 + k1 theta^2 + ... + k4 theta^8)): its maps come from
+  // cv::fisheye. OpenCV puts the upper-left pixel's centre at (0, 0), COLMAP at
+  // (0.5, 0.5): both camera matrices take the principal point less 0.5.
+  cv::Vec4d k(0, 0, 0, 0);
+  bool fisheye = true;
+  const std::vector<double>& p = distorted.params;
+  switch (distorted.model) {
+    case CameraModelId::kOpenCVFisheye: k = cv::Vec4d(p[4], p[5], p[6], p[7]); break;
+    case CameraModelId::kSimpleRadialFisheye: k = cv::Vec4d(p[3], 0, 0, 0); break;
+    case CameraModelId::kRadialFisheye: k = cv::Vec4d(p[3], p[4], 0, 0); break;
+    default: fisheye = false;
+  }
+  if (fisheye) {
+    const cv::Matx33d K(distorted.fx(), 0, distorted.cx() - 0.5, 0, distorted.fy(), distorted.cy() - 0.5, 0, 0, 1);
+    cv::fisheye::initUndistortRectifyMap(K, k, cv::Matx33d::eye(), K, cv::Size(distorted.width, distorted.height),
+                                         CV_32FC1, map_x_, map_y_);
+    return;
+  }
   map_x_.create(distorted.height, distorted.width, CV_32F);
   map_y_.create(distorted.height, distorted.width, CV_32F);
   for (int r = 0; r < distorted.height; ++r) {

@@ -34,6 +34,22 @@ std::vector<Camera> AllModels() {
   c.model = CameraModelId::kFullOpenCV;
   c.params = {500, 505, 320, 240, -0.1, 0.03, 0.001, -0.002, 0.001, 0.01, 0.002, 0.0005};
   cams.push_back(c);
+  // COLMAP's fisheye models and FOV (undistorted through cv::fisheye for the first three).
+  c.model = CameraModelId::kOpenCVFisheye;
+  c.params = {300, 305, 320, 240, 0.05, -0.01, 0.002, -0.0005};
+  cams.push_back(c);
+  c.model = CameraModelId::kSimpleRadialFisheye;
+  c.params = {300, 320, 240, 0.04};
+  cams.push_back(c);
+  c.model = CameraModelId::kRadialFisheye;
+  c.params = {300, 322, 238, 0.04, -0.006};
+  cams.push_back(c);
+  c.model = CameraModelId::kThinPrismFisheye;
+  c.params = {300, 305, 320, 240, 0.03, -0.01, 0.001, -0.002, 0.001, 0.0005, 0.001, -0.001};
+  cams.push_back(c);
+  c.model = CameraModelId::kFov;
+  c.params = {300, 305, 320, 240, 0.6};
+  cams.push_back(c);
   return cams;
 }
 
@@ -44,6 +60,27 @@ TEST(Camera, NamesRoundTrip) {
     EXPECT_EQ(c.Validate(), "");
   }
   EXPECT_THROW(CameraModelFromName("FISHEYE_XYZ"), std::invalid_argument);
+  EXPECT_EQ(AllModels().size(), 11u);  // COLMAP's models 0-10
+  EXPECT_EQ(CameraModelName(CameraModelId::kOpenCVFisheye), "OPENCV_FISHEYE");
+  EXPECT_EQ(static_cast<int>(CameraModelFromName("THIN_PRISM_FISHEYE")), 10);
+  EXPECT_FALSE(IsSupportedCameraModelId(11));
+}
+
+// The equidistant warp: a ray at angle theta from the axis lands at radius
+// f * theta (1 + k theta^2) (COLMAP's SIMPLE_RADIAL_FISHEYE), not f * tan(theta).
+TEST(Camera, FisheyeIsEquidistant) {
+  Camera c;
+  c.model = CameraModelId::kSimpleRadialFisheye;
+  c.width = 640;
+  c.height = 480;
+  c.params = {300, 320, 240, 0.04};
+  const double theta = 0.6;
+  Eigen::Vector2d p;
+  ASSERT_TRUE(c.Project(Eigen::Vector3d(std::sin(theta), 0, std::cos(theta)), &p));
+  EXPECT_NEAR(p.x() - 320, 300 * theta * (1 + 0.04 * theta * theta), 1e-9);
+  EXPECT_TRUE(c.HasDistortion());
+  c.params[3] = 0;
+  EXPECT_TRUE(c.HasDistortion());  // zero coefficients still warp
 }
 
 TEST(Camera, ProjectUnprojectRoundTripEveryModel) {

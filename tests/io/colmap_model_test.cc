@@ -34,7 +34,12 @@ ColmapModel MakeModel() {
       {CameraModelId::kRadial, {502, 320, 240, -0.08, 0.0213}},
       {CameraModelId::kOpenCV, {500, 505, 320, 240, -0.1, 0.03, 0.001, -0.002}},
       {CameraModelId::kFullOpenCV,
-       {500, 505, 320, 240, -0.1, 0.03, 0.001, -0.002, 0.001, 0.01, 0.002, 0.0005}}};
+       {500, 505, 320, 240, -0.1, 0.03, 0.001, -0.002, 0.001, 0.01, 0.002, 0.0005}},
+      {CameraModelId::kOpenCVFisheye, {300, 305, 320, 240, 0.05, -0.01, 0.002, -0.0005}},
+      {CameraModelId::kFov, {300, 305, 320, 240, 0.6}},
+      {CameraModelId::kSimpleRadialFisheye, {300, 320, 240, 0.04}},
+      {CameraModelId::kRadialFisheye, {300, 322, 238, 0.04, -0.006}},
+      {CameraModelId::kThinPrismFisheye, {300, 305, 320, 240, 0.03, -0.01, 0.001, -0.002, 0.001, 0.0005, 0.001, -0.001}}};
   std::uint32_t id = 3;  // non-contiguous ids on purpose
   for (const auto& [m, params] : specs) {
     Camera c;
@@ -256,16 +261,16 @@ TEST(ColmapModelBadInput, UnknownCameraAndBadCameras) {
   WriteColmapModelText(model, tmp.path() / "text");
   ExpectInputError([&] { ReadColmapModel(tmp.path() / "text"); }, {"images.txt", "camera 999"});
 
-  // Unsupported model (5 = OPENCV_FISHEYE) in binary, unknown name in text, wrong parameter count.
+  // Unsupported model (11 = RAD_TAN_THIN_PRISM_FISHEYE) in binary, unknown name in text, wrong parameter count.
   model = MakeModel();
   WriteColmapModelBinary(model, tmp.path());
   std::string cams = ReadBytes(tmp.path() / "cameras.bin");
-  const std::int32_t fisheye = 5;
-  std::memcpy(cams.data() + 8 + 4, &fisheye, 4);
+  const std::int32_t unsupported = 11;
+  std::memcpy(cams.data() + 8 + 4, &unsupported, 4);
   WriteBytes(tmp.path() / "cameras.bin", cams);
-  ExpectInputError([&] { ReadColmapModel(tmp.path()); }, {"cameras.bin", "unsupported camera model id 5"});
-  std::ofstream(tmp.path() / "text" / "cameras.txt") << "1 FOV 64 48 50 32 24 0.1\n";
-  ExpectInputError([&] { ReadColmapModel(tmp.path() / "text"); }, {"cameras.txt", "line 1", "FOV"});
+  ExpectInputError([&] { ReadColmapModel(tmp.path()); }, {"cameras.bin", "unsupported camera model id 11"});
+  std::ofstream(tmp.path() / "text" / "cameras.txt") << "1 RAD_TAN_THIN_PRISM_FISHEYE 64 48 50 32 24 0.1\n";
+  ExpectInputError([&] { ReadColmapModel(tmp.path() / "text"); }, {"cameras.txt", "line 1", "RAD_TAN_THIN_PRISM_FISHEYE"});
   std::ofstream(tmp.path() / "text" / "cameras.txt") << "1 PINHOLE 64 48 50 32 24\n";
   ExpectInputError([&] { ReadColmapModel(tmp.path() / "text"); }, {"cameras.txt", "line 1", "parameters"});
   std::ofstream(tmp.path() / "text" / "cameras.txt") << "1 PINHOLE 64 48 -50 50 32 24\n";
