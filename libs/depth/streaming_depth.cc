@@ -6,6 +6,7 @@
 #include <map>
 #include <set>
 
+#include "depth/sliding_vote_grid.h"
 #include "geometry/view_graph.h"
 #include "util/error.h"
 #include "util/progress.h"
@@ -31,48 +32,80 @@ std::vector<int> FilterVoters(const ViewGraph& wide, const std::vector<char>& on
   return out;
 }
 
-StreamingDepthStats StreamingDepth::Run(FrameSource& frames, const std::vector<int>& wanted_in, const Sink& sink) {
-  const int n = static_cast<int>(views_.size());
-  StreamingDepthStats stats;
-  std::vector<Eigen::Vector3d> dirs;
-  for (const auto& v : views_) dirs.push_back(v.ViewingDirection());
-  const ViewGraph near(dirs, options_.gradient.max_view_angle_deg, options_.max_frame_gap);
-  const ViewGraph wide(dirs, options_.filter.max_view_angle_deg, options_.max_frame_gap);
-
-  std::vector<int> wanted = wanted_in;
+DepthPlan PlanDepth(const std::vector<PinholeView>& views, const StreamingDepthOptions& options,
+                    std::vector<int> wanted) {
+  const int n = static_cast<int>(views.size());
   if (wanted.empty())
     for (int i = 0; i < n; ++i) wanted.push_back(i);
   for (int i : wanted)
     if (i < 0 || i >= n) throw OptionError("view index " + std::to_string(i) + " out of range [0, " + std::to_string(n) + ")");
-
+  std::sort(wanted.begin(), wanted.end());
+  wanted.erase(std::unique(wanted.begin(), wanted.end()), wanted.end());
+  DepthPlan plan;
+  plan.wanted = wanted;
+  std::vector<Eigen::Vector3d> dirs;
+  for (const auto& v : views) dirs.push_back(v.ViewingDirection());
+  const ViewGraph near(dirs, options.gradient.max_view_angle_deg, options.max_frame_gap);
   // The frames each sparse map uses: the estimator's own selection among the
   // views within 5°, on the sequence's hierarchy grid (level_min_step_deg), so
   // a dense sequence holds only the grid frames and the pending references
   // with their nearest neighbours, not every frame within 5°. The filter's
   // voters are on the same grid.
-  const std::vector<char> on_grid = HierarchyGrid(views_, options_.gradient);
-  std::vector<std::vector<int>> voters(n);
-  if (options_.run_filter)
-    for (int i : wanted) voters[i] = FilterVoters(wide, on_grid, i);
-  // Which sparse maps are needed, and when (after which frame) each can be computed.
-  std::vector<char> need_sparse(n, 0);
-  for (int i : wanted) {
-    need_sparse[i] = 1;
-    for (int j : voters[i]) need_sparse[j] = 1;
+  plan.on_grid = HierarchyGrid(views, options.gradient);
+  plan.voters.assign(n, {});
+  if (options.run_filter) {
+    const ViewGraph wide(dirs, options.filter.max_view_angle_deg, options.max_frame_gap);
+    for (int i : wanted) {
+      plan.voters[i] = FilterVoters(wide, plan.on_grid, i);
+      std::sort(plan.voters[i].begin(), plan.voters[i].end());
+    }
   }
-  std::vector<std::vector<int>> uses(n);  // frames sparse map s uses besides s
-  std::vector<int> sparse_ready(n, -1);  // last frame index that sparse map s needs
-  std::vector<int> frame_last_use(n, -1);
+  plan.need_sparse.assign(n, 0);
+  for (int i : wanted) {
+    plan.need_sparse[i] = 1;
+    for (int j : plan.voters[i]) plan.need_sparse[j] = 1;
+  }
+  plan.uses.assign(n, {});
   for (int s = 0; s < n; ++s) {
-    if (!need_sparse[s]) continue;
+    if (!plan.need_sparse[s]) continue;
     const std::vector<int>& nb = near.Neighbors(s);
     std::vector<const PinholeView*> nb_views;
     std::vector<char> nb_grid;
     for (int j : nb) {
-      nb_views.push_back(&views_[j]);
-      nb_grid.push_back(on_grid[j]);
+      nb_views.push_back(&views[j]);
+      nb_grid.push_back(plan.on_grid[j]);
     }
-    for (int q : SelectHierarchyViews(views_[s], nb_views, nb_grid, options_.gradient)) uses[s].push_back(nb[q]);
+    for (int q : SelectHierarchyViews(views[s], nb_views, nb_grid, options.gradient)) plan.uses[s].push_back(nb[q]);
+  }
+  plan.read_before_emit.assign(n, -1);
+  for (int i : wanted) {
+    int last = i;
+    for (int j : near.Neighbors(i)) last = std::max(last, j);
+    plan.read_before_emit[i] = last;
+  }
+  return plan;
+}
+
+StreamingDepthStats StreamingDepth::Run(FrameSource& frames, const std::vector<int>& wanted, const Sink& sink) {
+  return Run(frames, PlanDepth(views_, options_, wanted), sink);
+}
+
+StreamingDepthStats StreamingDepth::Run(FrameSource& frames, const DepthPlan& plan, const Sink& sink) {
+  const int n = static_cast<int>(views_.size());
+  StreamingDepthStats stats;
+  if (plan.num_views() != n || static_cast<int>(plan.uses.size()) != n || static_cast<int>(plan.voters.size()) != n ||
+      static_cast<int>(plan.need_sparse.size()) != n || static_cast<int>(plan.read_before_emit.size()) != n)
+    throw OptionError("depth plan of " + std::to_string(plan.num_views()) + " views for " + std::to_string(n));
+  const std::vector<int>& wanted = plan.wanted;
+  const std::vector<char>& on_grid = plan.on_grid;
+  const std::vector<char>& need_sparse = plan.need_sparse;
+  const std::vector<std::vector<int>>& voters = plan.voters;
+  const std::vector<std::vector<int>>& uses = plan.uses;  // frames sparse map s uses besides s
+  // When (after which frame) each sparse map can be computed.
+  std::vector<int> sparse_ready(n, -1);  // last frame index that sparse map s needs
+  std::vector<int> frame_last_use(n, -1);
+  for (int s = 0; s < n; ++s) {
+    if (!need_sparse[s]) continue;
     int last = s;
     for (int j : uses[s]) last = std::max(last, j);
     sparse_ready[s] = last;
@@ -82,10 +115,10 @@ StreamingDepthStats StreamingDepth::Run(FrameSource& frames, const std::vector<i
   std::vector<int> filter_ready(n, -1), sparse_last_use(n, -1);
   std::vector<char> is_wanted(n, 0);
   for (int i : wanted) {
+    if (i < 0 || i >= n || !need_sparse[i]) throw OptionError("depth plan: view " + std::to_string(i) + " is not planned");
     is_wanted[i] = 1;
     // Every frame within 5° of i is read (and tapped) before i is emitted.
-    int last = sparse_ready[i];
-    for (int j : near.Neighbors(i)) last = std::max(last, j);
+    int last = std::max(sparse_ready[i], plan.read_before_emit[i]);
     for (int j : voters[i]) last = std::max(last, sparse_ready[j]);
     filter_ready[i] = last;
     sparse_last_use[i] = std::max(sparse_last_use[i], last);
@@ -99,9 +132,8 @@ StreamingDepthStats StreamingDepth::Run(FrameSource& frames, const std::vector<i
   for (int s = 0; s < n; ++s) last_frame = std::max({last_frame, sparse_ready[s], filter_ready[s]});
 
   const GradientDepthEstimator estimator(options_.gradient);
-  std::unique_ptr<VoteGrid> grid;
-  std::set<int> in_grid;
-  if (options_.run_filter) grid = std::make_unique<VoteGrid>(volume_, options_.filter);
+  std::unique_ptr<SlidingVoteGrid> grid;
+  if (options_.run_filter) grid = std::make_unique<SlidingVoteGrid>(volume_, options_.filter);
 
   std::map<int, ViewImage> held;
   // Sparse maps wait packed (valid pixels only): at 0.12° spacing ~250 of
@@ -177,19 +209,9 @@ StreamingDepthStats StreamingDepth::Run(FrameSource& frames, const std::vector<i
         Timer timer;
         std::set<int> voting(voters[i].begin(), voters[i].end());
         voting.insert(i);
-        for (auto it = in_grid.begin(); it != in_grid.end();) {
-          if (!voting.count(*it)) {
-            grid->Splat(sparse.at(*it).Unpack(), views_[*it], -1.0f);
-            it = in_grid.erase(it);
-          } else {
-            ++it;
-          }
-        }
-        for (int v : voting)
-          if (!in_grid.count(v)) {
-            grid->Splat(sparse.at(v).Unpack(), views_[v], 1.0f);
-            in_grid.insert(v);
-          }
+        grid->MoveTo(
+            voting, [&](int v) { return sparse.at(v).Unpack(); },
+            [&](int v) -> const PinholeView& { return views_[v]; });
         filtered = grid->Filter(own, views_[i]);
         stats.seconds_filter += timer.Seconds();
         ++stats.filtered_maps;
@@ -201,7 +223,7 @@ StreamingDepthStats StreamingDepth::Run(FrameSource& frames, const std::vector<i
     // Release what no pending view needs any more.
     for (auto it = held.begin(); it != held.end();) it = frame_last_use[it->first] <= f ? held.erase(it) : std::next(it);
     for (auto it = sparse.begin(); it != sparse.end();) {
-      if (sparse_last_use[it->first] <= f && !in_grid.count(it->first)) {
+      if (sparse_last_use[it->first] <= f && !(grid && grid->Holds(it->first))) {
         sparse_bytes -= it->second.Bytes();
         it = sparse.erase(it);
       }

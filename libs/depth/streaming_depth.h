@@ -50,6 +50,28 @@ struct StreamingDepthStats {
 
 class ViewGraph;
 
+// What the depth stage computes over a sequence, and from which frames: the
+// depth part of the job's reconstruction plan (libs/pipeline ReconstructionPlan
+// holds one; PlanDepth computes it). Per frame index.
+struct DepthPlan {
+  std::vector<int> wanted;             // views whose filtered maps are emitted, increasing
+  std::vector<char> on_grid;           // HierarchyGrid: usable beyond the hierarchy's first level
+  std::vector<char> need_sparse;       // a sparse map is computed: the wanted views and their voters
+  std::vector<std::vector<int>> uses;  // need_sparse: the frames its sparse map uses, in SelectHierarchyViews order
+  std::vector<std::vector<int>> voters;  // wanted (with the filter): FilterVoters, increasing
+  // wanted: every frame up to this one is read (and tapped) before the view is
+  // emitted: its neighbours within gradient.max_view_angle_deg.
+  std::vector<int> read_before_emit;
+  int num_views() const { return static_cast<int>(on_grid.size()); }
+};
+
+// The depth plan of `views` (a sequence) for the views `wanted` (all when
+// empty; checked against the range, then sorted and made unique). View s's
+// entries need only the cameras within max_frame_gap and the filter's angle of
+// it (and on_grid, which depends on the cameras before it only). Throws OptionError.
+DepthPlan PlanDepth(const std::vector<PinholeView>& views, const StreamingDepthOptions& options,
+                    std::vector<int> wanted);
+
 // The views whose sparse maps vote in view i's filtered map (§3.2): its
 // neighbours within the filter's angle (`wide`) that lie on the hierarchy
 // grid (`on_grid`, HierarchyGrid: views ≥ level_min_step_deg apart). Where
@@ -68,6 +90,9 @@ class StreamingDepth {
   // Reads `frames` in order (its frame k is view k) and calls `sink` for every
   // view in `wanted` (all views when empty), in the order they complete.
   StreamingDepthStats Run(FrameSource& frames, const std::vector<int>& wanted, const Sink& sink);
+  // The same with the plan given (PlanDepth of these views and options, or a
+  // ReconstructionPlan's depth part).
+  StreamingDepthStats Run(FrameSource& frames, const DepthPlan& plan, const Sink& sink);
 
   // Optional: called once for every frame read, in sequence order, before any
   // sink call at that frame. The ViewImage is the one the depth stage holds

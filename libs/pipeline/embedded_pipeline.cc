@@ -13,7 +13,8 @@
 #include <set>
 
 #include "fusion/mesh_render.h"
-#include "geometry/view_graph.h"
+#include "pipeline/finish_surface.h"
+#include "pipeline/reconstruction_plan.h"
 #include "io/depth_map_io.h"
 #include "io/ply.h"
 #include "util/error.h"
@@ -22,25 +23,6 @@
 
 namespace lfrecon {
 namespace fs = std::filesystem;
-
-void PipelineOptions::Check() const {
-  depth.Check();
-  if (densify) propagation.Check();
-  if (!(voxel_size >= 0) || !std::isfinite(voxel_size)) throw OptionError("voxel size must be positive");
-  if (voxel_size == 0 && voxel_divisions < 1) throw OptionError("voxel_divisions must be >= 1");
-  meshing.Check();
-  coloring.Check();
-  if (color_views < 0) throw OptionError("color_views must be >= 0");
-  if (refine) refine_options.Check();
-  if (carving_views < 0) throw OptionError("carving_views must be >= 0");
-  if (!(dense_sigma_s > 0)) throw OptionError("dense_sigma_s must be positive");
-  // The fusion as Run() sets it up (σ_s of dense maps), but for V and the voxel size.
-  FusionOptions fo = fusion;
-  if (densify) fo.sigma_s = dense_sigma_s;
-  fo.CheckModel();
-  if (!(background_confidence_floor >= 0 && background_confidence_floor <= 1))
-    throw OptionError("background_confidence_floor must be in [0, 1]");
-}
 
 DepthMap WithBackgroundConfidenceFloor(const DepthMap& map, const PinholeView& view, const BoundingBox& volume,
                                        double floor) {
@@ -63,11 +45,6 @@ DepthMap WithBackgroundConfidenceFloor(const DepthMap& map, const PinholeView& v
     }
   }
   return out;
-}
-
-double PipelineVoxelSize(const BoundingBox& volume, const PipelineOptions& options) {
-  if (options.voxel_size > 0) return options.voxel_size;
-  return volume.Extent().maxCoeff() / options.voxel_divisions;
 }
 
 EmbeddedPipeline::EmbeddedPipeline(std::vector<PinholeView> views, const BoundingBox& volume,
@@ -186,21 +163,13 @@ PipelineResult EmbeddedPipeline::Run(FrameSource& frames) {
   const int n = static_cast<int>(views_.size());
   if (frames.NumFrames() > 0 && frames.NumFrames() < n)
     throw InputError("frames", std::to_string(frames.NumFrames()) + " frames for " + std::to_string(n) + " views");
-  std::vector<int> wanted = options_.views;
-  if (wanted.empty())
-    for (int i = 0; i < n; ++i) wanted.push_back(i);
-  std::sort(wanted.begin(), wanted.end());
-  wanted.erase(std::unique(wanted.begin(), wanted.end()), wanted.end());
-  for (int i : wanted)
-    if (i < 0 || i >= n) throw OptionError("view " + std::to_string(i) + " out of range [0, " + std::to_string(n) + ")");
+  // Which views, which neighbours, which frames for colour and carving: the plan, as the service computes it.
+  const ReconstructionPlan plan = ReconstructionPlan::Compute(views_, volume_, options_);
+  const std::vector<int>& wanted = plan.views;
 
   PipelineResult result;
   PipelineStats& st = result.stats;
-  FusionOptions fo = options_.fusion;
-  fo.volume = volume_;
-  fo.voxel_size = PipelineVoxelSize(volume_, options_);
-  if (options_.densify) fo.sigma_s = options_.dense_sigma_s;
-  fo.Check();
+  const FusionOptions& fo = plan.fusion;
   st.voxel_size = fo.voxel_size;
   const Eigen::Vector3i gs = fo.GridSize();
   ProbabilisticFusion fusion(fo);
@@ -216,30 +185,17 @@ PipelineResult EmbeddedPipeline::Run(FrameSource& frames) {
   // The densification window: frame j is kept while a view that needs it
   // (itself or a view within the photoconsistency angle) is still pending.
   std::vector<int> refcount(n, 0);
-  ViewGraph photo_graph;
-  if (options_.densify) {
-    std::vector<Eigen::Vector3d> dirs;
-    for (const auto& v : views_) dirs.push_back(v.ViewingDirection());
-    photo_graph = ViewGraph(dirs, options_.propagation.photo.max_view_angle_deg, options_.depth.max_frame_gap);
+  if (options_.densify)
     for (int i : wanted) {
       ++refcount[i];
-      for (int j : photo_graph.Neighbors(i)) ++refcount[j];
+      for (int j : plan.PhotoNeighbours(i)) ++refcount[j];
     }
-  }
   std::map<int, WindowFrame> window;
-  // Frames kept for colouring: a few evenly spread over the processed views.
-  std::set<int> color_ids;
-  const int k = std::min<int>(options_.color_views, static_cast<int>(wanted.size()));
-  for (int c = 0; c < k; ++c) color_ids.insert(wanted[static_cast<std::size_t>(c) * wanted.size() / k]);
-  std::vector<ColorView> color_views;
+  // Frames kept for colouring and for carving: a few evenly spread over the processed views (the plan's).
+  const std::set<int> color_ids(plan.color_frames.begin(), plan.color_frames.end());
+  const std::set<int> carve_ids(plan.carving_frames.begin(), plan.carving_frames.end());
+  std::vector<ColorView> color_views, carve_views;
   std::map<int, cv::Mat> kept_frames;  // colour and carving frames (CompactFrame) until the stream ends
-  // Frames kept for carving, likewise.
-  std::set<int> carve_ids;
-  const int kc = options_.refine && options_.refine_options.carve
-                     ? std::min<int>(options_.carving_views, static_cast<int>(wanted.size()))
-                     : 0;
-  for (int c = 0; c < kc; ++c) carve_ids.insert(wanted[static_cast<std::size_t>(c) * wanted.size() / kc]);
-  std::vector<ColorView> carve_views;
 
   StreamingDepth depth(views_, volume_, options_.depth);
   depth.SetFrameTap([&](int f, const ViewImage& v, const cv::Mat& compacted) {
@@ -252,7 +208,7 @@ PipelineResult EmbeddedPipeline::Run(FrameSource& frames) {
   const DepthPropagator propagator(options_.propagation);
   int done = 0;
   const StreamingDepthStats ds = depth.Run(
-      frames, wanted, [&](int i, const cv::Mat& image, const DepthMap& sparse, const DepthMap& filtered) {
+      frames, plan.depth, [&](int i, const cv::Mat& image, const DepthMap& sparse, const DepthMap& filtered) {
         const DepthMap& base = options_.depth.run_filter ? filtered : sparse;
         st.sparse_pixels += sparse.CountValid();
         st.filtered_pixels += filtered.CountValid();
@@ -264,8 +220,8 @@ PipelineResult EmbeddedPipeline::Run(FrameSource& frames) {
           const GradientDepthOptions& go = options_.depth.gradient;
           const PhotoconsistencyOptions& po = options_.propagation.photo;
           std::vector<const WindowFrame*> nbs;
-          nbs.reserve(photo_graph.Neighbors(i).size());
-          for (int j : photo_graph.Neighbors(i)) {
+          nbs.reserve(plan.PhotoNeighbours(i).size());
+          for (int j : plan.PhotoNeighbours(i)) {
             const auto it = window.find(j);
             if (it != window.end()) nbs.push_back(&it->second);
           }
@@ -279,7 +235,7 @@ PipelineResult EmbeddedPipeline::Run(FrameSource& frames) {
           }
           fused_map = DensifyNeighbourByNeighbour(propagator, reference, nbs, base, volume_, go);
           st.seconds_densify += t.Seconds();
-          for (int j : photo_graph.Neighbors(i))
+          for (int j : plan.PhotoNeighbours(i))
             if (--refcount[j] == 0) window.erase(j);
           if (--refcount[i] == 0) window.erase(i);
         } else {
@@ -339,25 +295,17 @@ PipelineResult EmbeddedPipeline::Run(FrameSource& frames) {
   result.mesh_raw = fusion.ExtractMesh(mo);
   st.seconds_mesh = tm.Seconds();
   st.carving_frames = static_cast<int>(carve_views.size());
-  if (options_.refine) {
-    Timer tr;
-    RefineResult refined = RefineFusedSurface(fusion, carve_views, options_.refine_options, mo);
-    st.refine = refined.stats;
-    st.seconds_refine = tr.Seconds();
-    // Too few boundary voxels for Poisson: keep the fused surface rather than nothing.
-    result.mesh = refined.mesh.triangles.empty() ? result.mesh_raw : std::move(refined.mesh);
-  } else {
-    result.mesh = result.mesh_raw;
-  }
+  st.color_frames = static_cast<int>(color_views.size());
+  // Refine, fall back to the fused surface, colour: as the service's refined export.
+  FinishedSurface finished = FinishSurface(fusion, result.mesh_raw, carve_views, color_views, options_);
   carve_views.clear();
+  color_views.clear();
+  result.mesh = std::move(finished.mesh);
+  st.refine = finished.refine;
+  st.seconds_refine = finished.seconds_refine;
+  st.seconds_color = finished.seconds_color;
   st.mesh_vertices = result.mesh.vertices.size();
   st.mesh_triangles = result.mesh.triangles.size();
-  Timer tc;
-  st.color_frames = static_cast<int>(color_views.size());
-  if (!color_views.empty() && !result.mesh.triangles.empty())
-    ColorizeMesh(&result.mesh, color_views, options_.coloring);
-  color_views.clear();
-  st.seconds_color = tc.Seconds();
   spdlog::info("run: {} of {} active voxels have H >= {}", st.voxels_above_threshold, st.active_voxels, iso);
   spdlog::info("run: mesh {} vertices, {} triangles ({:.1f} s), coloured from {} frames ({:.1f} s)",
                st.mesh_vertices, st.mesh_triangles, st.seconds_mesh, st.color_frames, st.seconds_color);
@@ -379,7 +327,10 @@ PipelineResult EmbeddedPipeline::Run(FrameSource& frames) {
 
   const auto& po = options_.propagation;
   result.report = {
-      {"views", {{"total", n}, {"processed", st.views}}},
+      {"views", {{"total", n}, {"processed", st.views}, {"selected", plan.views.size()},
+                 {"selection", options_.views.empty() && options_.selection.enabled
+                                   ? nlohmann::json(options_.selection.min_step_deg)
+                                   : nlohmann::json(options_.views.empty() ? "all" : "given")}}},
       {"volume", BoxJson(volume_)},
       {"voxel_size", st.voxel_size},
       {"grid_size", {gs.x(), gs.y(), gs.z()}},
@@ -444,6 +395,7 @@ PipelineResult EmbeddedPipeline::Run(FrameSource& frames) {
         {"consistency_threshold", options_.refine_options.carving.consistency_threshold},
         {"carving_rounds", options_.refine_options.carving.max_rounds}}},
   };
+  for (const auto& [key, value] : options_.extra_report.items()) result.report[key] = value;
   if (write) {
     std::ofstream f(options_.out_dir / "report.json");
     f << result.report.dump(2) << "\n";

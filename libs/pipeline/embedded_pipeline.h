@@ -19,111 +19,15 @@
 #include <string>
 #include <vector>
 
-#include "depth/streaming_depth.h"
-#include "fusion/fusion_options.h"
 #include "fusion/mesh_coloring.h"
 #include "fusion/probabilistic_fusion.h"
 #include "geometry/pinhole_view.h"
 #include "geometry/triangle_mesh.h"
 #include "io/frame_source.h"
-#include "propagation/depth_propagator.h"
+#include "pipeline/pipeline_options.h"
 #include "refine/refine.h"
 
 namespace lfrecon {
-
-struct PipelineOptions {
-  StreamingDepthOptions depth;
-  // §4 densification of each filtered map before fusion; false fuses the
-  // filtered sparse maps directly.
-  bool densify = true;
-  PropagationOptions propagation;
-  // Fusion parameters; volume and voxel_size are set by the pipeline. Dense
-  // depths weaker than c = 0.01 give evidence but activate no voxels. Measured
-  // with fusion_from_depth_bench (σ_s 0.15) as F@5mm / thin recall@5mm:
-  //   min c      0            0.01         0.03         0.05
-  //   figurines  0.618/0.686  0.647/0.685  0.681/0.681  0.690/0.643
-  //   demo       0.795/0.500  0.808/0.403  0.809/0.219  -
-  // (demo: the synthetic tabletop of deploy/demo.sh, 320x180). Higher values
-  // are faster and more precise but lose thin parts, whose dense depths are
-  // the weakest; 0.01 keeps the figurines' thin recall. Pruning (prune_every)
-  // stays off: the voxels it drops keep coming back, and back-filling them
-  // cost more than it saved (figurines: 208 s of back-fill in a 253 s fusion).
-  //
-  // P_i is clamped to [0.03, 0.97] (FusionOptions::probability_clamp; the
-  // library default is 1e-6): one view's free-space vote then weighs at most
-  // log 0.03 = -3.5 instead of -13.8, so a voxel survives a few views whose
-  // dense maps put the background where it is (a silhouette one or two pixels
-  // off wipes out a stick 3-5 pixels wide), while space that most views see
-  // as free is still carved. fusion_from_depth_bench --probability-clamp,
-  // F@2mm / F@5mm / P@5mm / thin recall@5mm of the fused mesh:
-  //   clamp      1e-6                     0.01                     0.03
-  //   figurines  0.462/0.647/0.701/0.685  0.473/0.653/0.696/0.742  0.468/0.651/0.683/0.774
-  //   demo       0.492/0.808/0.864/0.403  0.640/0.832/0.875/0.400  0.653/0.836/0.868/0.386
-  // (0.1: demo 0.563/0.812/0.805/0.359.)
-  FusionOptions fusion = [] {
-    FusionOptions f;
-    f.activation_min_confidence = 0.01;
-    f.probability_clamp = 0.03;
-    return f;
-  }();
-  // σ_s of eq. 12-13 used instead of fusion.sigma_s when the maps are dense:
-  // the dense confidence |C'_fg - C'_bg| (§4) averages ~0.1 on the foreground
-  // (measured on the synthetic sphere) where the sparse one is ~1, so σ_s must
-  // shrink with it for a single view's evidence to matter. On the sphere test
-  // (180 views, 4 mm voxels) F@8mm is 0.974 / 0.989 / 0.965 / 0.828 / 0.551 /
-  // 0 for σ_s 0.1 / 0.15 / 0.2 / 0.3 / 0.4 / 0.7.
-  double dense_sigma_s = 0.15;
-  // Dense maps only: background depths (label background, or no label and the
-  // point outside V) get at least this confidence before fusion. The dense
-  // confidence |C'_fg - C'_bg| of background pixels is mostly 0.002-0.05 (the
-  // background has few sparse depths to propagate), and with σ_s 0.15 a voxel
-  // whose views say "free" with c > -0.016 on average stays above H = 0.2, so
-  // spurious surface in front of the background (smeared silhouettes, depth
-  // outliers) survives. Measured with fusion_from_depth_bench
-  // --bg-confidence-floor, F@5mm / P@5mm / thin recall@5mm of the fused mesh:
-  //   floor      0                  0.03               0.06
-  //   figurines  0.647/0.701/0.685  0.679/0.745/0.697  -
-  //   demo       0.808/0.864/0.403  0.743/0.842/0.050  0.703/0.847/0.032
-  // Off by default: the demo's thin sticks are background in most of their
-  // views' dense maps, and a floor carves them away.
-  double background_confidence_floor = 0;
-  // Voxel edge in metres; <= 0: the longest side of V / voxel_divisions.
-  double voxel_size = 0;
-  int voxel_divisions = 256;
-  MeshingOptions meshing;  // threshold < 0: fusion.surface_threshold (0.2)
-  // Frames kept (evenly spread over the processed views) to colour the mesh; 0: no colours.
-  int color_views = 8;
-  ColoringOptions coloring;
-  // Refinement after fusion (BRIEF §1.6): voxel carving, then marching cubes of
-  // the carved grid (screened Poisson with refine_options.use_poisson);
-  // false: the final mesh is the fused iso-surface.
-  bool refine = true;
-  RefineOptions refine_options;
-  // Frames kept (evenly spread over the processed views) for carving's
-  // photo-consistency (eqs. 15-16); frames also kept for colour share pixels.
-  int carving_views = 24;
-  // Hold the frames of the densification window and the colour/carving frames
-  // as CV_8UC3 when they are exactly 8-bit (the CV_32FC3 frame is ToFloatBgr of
-  // an 8-bit image, as decoded PNG/JPEG/video frames are), and make the float
-  // frames (and their pre-smoothed copies) only while a view is densified:
-  // the window takes ~1/4 of the memory (1/9 for frames the depth stage had
-  // smoothed), with bit-identical results. Other frames are held as they come.
-  // While one view is densified, its neighbours' float frames are made one at
-  // a time (PhotoconsistencyAccumulator), whatever this option says.
-  // Cost: each neighbour's conversion and pre-smoothing is redone for every
-  // view that uses it.
-  bool compact_frames = true;
-  // Views to process (sequence indices); empty: all.
-  std::vector<int> views;
-  // Where to write mesh.ply, mesh_raw.ply, grid.vdb, report.json, mesh_turntable.png (and depth/
-  // when write_depth); empty: write nothing, only return the result.
-  std::filesystem::path out_dir;
-  bool write_depth = false;  // OUT/depth/<stem>.pfm and OUT/confidence/<stem>.pfm of the fused maps
-  bool write_vdb = true;
-  bool write_turntable = true;  // OUT/mesh_turntable.png: four shaded views of the final mesh
-
-  void Check() const;  // throws OptionError
-};
 
 struct PipelineStats {
   int views = 0;  // views fused
@@ -182,7 +86,5 @@ class EmbeddedPipeline {
 DepthMap WithBackgroundConfidenceFloor(const DepthMap& map, const PinholeView& view, const BoundingBox& volume,
                                        double floor);
 
-// The voxel size the pipeline uses for V and the options (voxel_size, or V's longest side / voxel_divisions).
-double PipelineVoxelSize(const BoundingBox& volume, const PipelineOptions& options);
 
 }  // namespace lfrecon

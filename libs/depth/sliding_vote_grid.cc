@@ -1,0 +1,22 @@
+#include "depth/sliding_vote_grid.h"
+
+namespace lfrecon {
+
+void SlidingVoteGrid::MoveTo(const std::set<int>& voters, const std::function<DepthMap(int)>& map,
+                             const std::function<const PinholeView&(int)>& view) {
+  for (auto it = in_grid_.begin(); it != in_grid_.end();) {
+    if (!voters.count(*it)) {
+      grid_.Splat(map(*it), view(*it), -1.0f);
+      it = in_grid_.erase(it);
+    } else {
+      ++it;
+    }
+  }
+  for (int v : voters)
+    if (!in_grid_.count(v)) {
+      grid_.Splat(map(v), view(v), 1.0f);
+      in_grid_.insert(v);
+    }
+}
+
+}  // namespace lfrecon

@@ -1,0 +1,30 @@
+#pragma once
+// The steps after fusion, one function for `lfrecon run` and the service's
+// refined export: refinement of the fused grid (voxel carving, then marching
+// cubes or screened Poisson: RefineFusedSurface), the fused mesh where the
+// refinement made nothing (too few boundary voxels for Poisson), then colour.
+#include <vector>
+
+#include "fusion/mesh_coloring.h"
+#include "fusion/probabilistic_fusion.h"
+#include "geometry/triangle_mesh.h"
+#include "pipeline/pipeline_options.h"
+#include "refine/refine.h"
+
+namespace lfrecon {
+
+struct FinishedSurface {
+  TriangleMesh mesh;  // refined (or the fused mesh), coloured when colour frames were given
+  RefineStats refine;
+  bool refined = false;  // options.refine and it made a surface
+  double seconds_refine = 0, seconds_color = 0;
+};
+
+// `fused`: the grid's iso-surface (ExtractMesh(options.meshing)); `carve`: the
+// carving frames (ReconstructionPlan::carving_frames), `color`: the colour frames.
+// Without options.refine the mesh is `fused`, coloured.
+FinishedSurface FinishSurface(const ProbabilisticFusion& fusion, const TriangleMesh& fused,
+                              const std::vector<ColorView>& carve, const std::vector<ColorView>& color,
+                              const PipelineOptions& options);
+
+}  // namespace lfrecon

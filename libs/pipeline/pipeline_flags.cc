@@ -1,0 +1,22 @@
+#include "pipeline/pipeline_flags.h"
+
+#include <cmath>
+
+#include "util/error.h"
+
+namespace lfrecon {
+
+PipelineOptions OptionsFromFlags(const ReconstructionFlags& f) {
+  PipelineOptions options;
+  if (!(f.voxel_size >= 0) || !std::isfinite(f.voxel_size)) throw OptionError("voxel size (--voxel-mm) must be positive");
+  options.voxel_size = f.voxel_size;
+  options.densify = !f.no_densify;
+  if (f.color_views) options.color_views = *f.color_views;
+  if (!(f.sigma_s >= 0) || !std::isfinite(f.sigma_s)) throw OptionError("sigma_s (--sigma-s) must be positive");
+  if (f.sigma_s > 0) (options.densify ? options.dense_sigma_s : options.fusion.sigma_s) = f.sigma_s;
+  options.selection.enabled = !f.all_views;
+  options.Check();
+  return options;
+}
+
+}  // namespace lfrecon

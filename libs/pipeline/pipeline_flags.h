@@ -1,0 +1,23 @@
+#pragma once
+// The one mapping from a reconstruction's user-facing flags to PipelineOptions:
+// `lfrecon run`'s flags and a service job's JobOptions (services/common/job_store.cc,
+// from `lfrecon submit`'s flags) both go through OptionsFromFlags, so a job and
+// a run with the same flags get the same options.
+#include <optional>
+
+#include "pipeline/pipeline_options.h"
+
+namespace lfrecon {
+
+struct ReconstructionFlags {
+  double voxel_size = 0;           // metres; 0: V's longest side / 256 (--voxel-mm / 1000)
+  double sigma_s = 0;              // σ_s of eq. 12-13; 0: the default (dense 0.15, sparse 0.7) (--sigma-s)
+  bool no_densify = false;         // fuse the filtered sparse maps (--no-densify)
+  std::optional<int> color_views;  // frames that colour the mesh; unset: the default (--color-views)
+  bool all_views = false;          // no view selection: every view gets depth and fusion (--all-views)
+};
+
+// PipelineOptions defaults with the flags applied; checked (PipelineOptions::Check). Throws OptionError.
+PipelineOptions OptionsFromFlags(const ReconstructionFlags& flags);
+
+}  // namespace lfrecon

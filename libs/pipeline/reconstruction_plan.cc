@@ -1,0 +1,69 @@
+#include "pipeline/reconstruction_plan.h"
+
+#include <algorithm>
+#include <cmath>
+
+#include "geometry/view_graph.h"
+#include "util/error.h"
+
+namespace lfrecon {
+
+void ViewSelectionOptions::Check() const {
+  LFRECON_CHECK_OPTION(min_step_deg >= 0 && min_step_deg < 90);
+}
+
+std::vector<int> SelectViews(const std::vector<PinholeView>& views, const ViewSelectionOptions& o) {
+  std::vector<int> out;
+  const int n = static_cast<int>(views.size());
+  if (!o.enabled || !(o.min_step_deg > 0)) {
+    for (int i = 0; i < n; ++i) out.push_back(i);
+    return out;
+  }
+  if (n == 0) return out;
+  out.push_back(0);
+  Eigen::Vector3d last = views[0].ViewingDirection();
+  for (int k = 1; k < n; ++k) {
+    const Eigen::Vector3d d = views[static_cast<std::size_t>(k)].ViewingDirection();
+    const double angle = std::acos(std::clamp(d.dot(last), -1.0, 1.0)) * 180.0 / M_PI;
+    // Up to rounding, as HierarchyGrid: a sequence spaced exactly the step apart keeps every view.
+    if (angle >= o.min_step_deg - 1e-6) {
+      out.push_back(k);
+      last = d;
+    }
+  }
+  return out;
+}
+
+std::vector<int> EvenlySpread(const std::vector<int>& views, int k) {
+  std::vector<int> out;
+  k = std::min<int>(k, static_cast<int>(views.size()));
+  for (int c = 0; c < k; ++c) out.push_back(views[static_cast<std::size_t>(c) * views.size() / k]);
+  return out;
+}
+
+ReconstructionPlan ReconstructionPlan::Compute(const std::vector<PinholeView>& cameras, const BoundingBox& volume,
+                                               const PipelineOptions& options) {
+  options.Check();
+  const int n = static_cast<int>(cameras.size());
+  if (n == 0) throw OptionError("reconstruction plan: no views");
+  ReconstructionPlan plan;
+  plan.fusion = PipelineFusionOptions(options, volume);
+  std::vector<int> wanted = options.views.empty() ? SelectViews(cameras, options.selection) : options.views;
+  plan.depth = PlanDepth(cameras, options.depth, wanted);  // checks the range, sorts
+  plan.views = plan.depth.wanted;
+  plan.selected.assign(static_cast<std::size_t>(n), 0);
+  for (int i : plan.views) plan.selected[static_cast<std::size_t>(i)] = 1;
+  plan.photo.assign(static_cast<std::size_t>(n), {});
+  if (options.densify) {
+    std::vector<Eigen::Vector3d> dirs;
+    for (const auto& v : cameras) dirs.push_back(v.ViewingDirection());
+    const ViewGraph photo(dirs, options.propagation.photo.max_view_angle_deg, options.depth.max_frame_gap);
+    for (int i : plan.views) plan.photo[static_cast<std::size_t>(i)] = photo.Neighbors(i);
+  }
+  plan.color_frames = EvenlySpread(plan.views, options.color_views);
+  if (options.refine && options.refine_options.carve)
+    plan.carving_frames = EvenlySpread(plan.views, options.carving_views);
+  return plan;
+}
+
+}  // namespace lfrecon

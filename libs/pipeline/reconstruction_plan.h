@@ -1,0 +1,60 @@
+#pragma once
+// The reconstruction plan of a job: which views get depth, densification and
+// fusion (view selection), each view's depth neighbours and their
+// hierarchy-grid flags (ViewImage::on_grid), the filter's voters, the
+// photoconsistency neighbours, the colour and carving frames, and the fusion
+// grid's options. Computed once per job from the cameras and the options
+// (ReconstructionPlan::Compute, the one place), and used by `lfrecon run`
+// (EmbeddedPipeline, StreamingDepth through plan.depth), by the service's
+// aggregator (what each task lists, when it is ready, when the job is done)
+// and by both workers (the on_grid flags of the frames a depth task reads), so
+// the two paths cannot drift apart.
+//
+// Growing with the stream (open-ended jobs): selection and on_grid are greedy
+// along the sequence (view k's flags depend on the cameras before it only);
+// view i's neighbours, voters and photoconsistency neighbours need only the
+// cameras within max_frame_gap frames and the stage's angle of it. Only the
+// colour and carving frames (evenly spread over the selected views) need the
+// whole sequence.
+#include <vector>
+
+#include "depth/streaming_depth.h"
+#include "fusion/fusion_options.h"
+#include "geometry/pinhole_view.h"
+#include "geometry/triangle_mesh.h"
+#include "pipeline/pipeline_options.h"
+
+namespace lfrecon {
+
+struct ReconstructionPlan {
+  // Throws OptionError (bad options, a view in options.views out of range, no views).
+  static ReconstructionPlan Compute(const std::vector<PinholeView>& views, const BoundingBox& volume,
+                                    const PipelineOptions& options);
+
+  int num_views() const { return static_cast<int>(selected.size()); }
+  bool Selected(int i) const { return selected.at(static_cast<std::size_t>(i)) != 0; }
+  bool OnGrid(int i) const { return depth.on_grid.at(static_cast<std::size_t>(i)) != 0; }
+  bool NeedsSparse(int i) const { return depth.need_sparse.at(static_cast<std::size_t>(i)) != 0; }
+  // Frames view i's sparse map uses besides i, in the order the estimator takes them.
+  const std::vector<int>& DepthNeighbours(int i) const { return depth.uses.at(static_cast<std::size_t>(i)); }
+  // Sparse maps voting in view i's filtered map besides i's own (selected views, with the filter).
+  const std::vector<int>& Voters(int i) const { return depth.voters.at(static_cast<std::size_t>(i)); }
+  // Frames within the photoconsistency angle of view i (selected views, when densifying), nearest first.
+  const std::vector<int>& PhotoNeighbours(int i) const { return photo.at(static_cast<std::size_t>(i)); }
+
+  std::vector<char> selected;  // per frame: gets depth, densification and fusion
+  std::vector<int> views;      // the selected views, increasing
+  DepthPlan depth;             // StreamingDepth's part (wanted = views)
+  std::vector<std::vector<int>> photo;
+  std::vector<int> color_frames;    // options.color_views frames evenly spread over `views`
+  std::vector<int> carving_frames;  // options.carving_views likewise, when refining with carving
+  FusionOptions fusion;             // PipelineFusionOptions for V
+};
+
+// View selection alone (ViewSelectionOptions): the selected indices, increasing.
+std::vector<int> SelectViews(const std::vector<PinholeView>& views, const ViewSelectionOptions& options);
+
+// `k` of `views` evenly spread (views[c * size / k], c < k), as the colour and carving frames are chosen.
+std::vector<int> EvenlySpread(const std::vector<int>& views, int k);
+
+}  // namespace lfrecon

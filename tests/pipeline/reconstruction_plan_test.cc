@@ -1,0 +1,140 @@
+// The reconstruction plan on generated camera paths: neighbour counts, on_grid
+// flags and view selection against hand-computed expectations.
+#include "pipeline/reconstruction_plan.h"
+
+#include <gtest/gtest.h>
+
+#include <Eigen/Geometry>
+#include <algorithm>
+#include <cmath>
+
+#include "pipeline/pipeline_flags.h"
+#include "util/error.h"
+
+namespace lfrecon {
+namespace {
+
+// `n` cameras on a horizontal circle (radius 1 m) around the origin, looking at
+// it, `step_deg` apart in azimuth: consecutive viewing directions differ by step_deg.
+std::vector<PinholeView> Arc(int n, double step_deg) {
+  std::vector<PinholeView> out;
+  for (int k = 0; k < n; ++k) {
+    const double a = k * step_deg * M_PI / 180.0;
+    const Eigen::Vector3d c(std::cos(a), std::sin(a), 0.0);
+    const Eigen::Vector3d z = -c;  // forward
+    const Eigen::Vector3d up(0, 0, 1);
+    const Eigen::Vector3d x = z.cross(-up).normalized();
+    const Eigen::Vector3d y = z.cross(x);
+    PinholeView v;
+    v.width = 160;
+    v.height = 90;
+    v.K << 150, 0, 80, 0, 150, 45, 0, 0, 1;
+    v.K_inv = v.K.inverse();
+    v.R.row(0) = x.transpose();
+    v.R.row(1) = y.transpose();
+    v.R.row(2) = z.transpose();
+    v.t = -v.R * c;
+    out.push_back(v);
+  }
+  return out;
+}
+
+BoundingBox Box() {
+  BoundingBox b;
+  b.min = Eigen::Vector3d(-0.2, -0.2, -0.2);
+  b.max = Eigen::Vector3d(0.2, 0.2, 0.2);
+  return b;
+}
+
+// 0.35° apart (under the hierarchy grid's 0.5°): the grid and the selection are
+// the even views (view 0, then the first view >= 0.5° from the last kept: 0.7°).
+// For an even view s far from the ends, by hand:
+//  * within 5° of it: s±1 .. s±14 (14 × 0.35 = 4.9°), 28 frames;
+//  * depth neighbours: the first level s-1, s+1; then per side the grid views
+//    >= 0.5° from the last one used: s∓2 is 0.35° from s∓1 (no), s∓4 .. s∓14 are
+//    (1.05°, then 0.7° apart): 6 per side, 2 + 12 = 14 (not 28: the service's
+//    workers, which left on_grid unset, read every frame within 5°);
+//  * voters: the even views within 15° (42 × 0.35 = 14.7°), 21 per side, 42;
+//  * photoconsistency neighbours: the 28 frames within 5°.
+TEST(ReconstructionPlan, DenseArcNeighboursAndGridAgainstHandCounts) {
+  const std::vector<PinholeView> cams = Arc(200, 0.35);
+  PipelineOptions o;
+  o.depth.max_frame_gap = 0;
+  const ReconstructionPlan plan = ReconstructionPlan::Compute(cams, Box(), o);
+  ASSERT_EQ(plan.num_views(), 200);
+  for (int k = 0; k < 200; ++k) {
+    EXPECT_EQ(plan.OnGrid(k), k % 2 == 0) << k;
+    EXPECT_EQ(plan.Selected(k), k % 2 == 0) << k;
+    EXPECT_EQ(plan.NeedsSparse(k), k % 2 == 0) << k;
+  }
+  EXPECT_EQ(plan.views.size(), 100u);
+  const int s = 100;
+  const std::vector<int>& nb = plan.DepthNeighbours(s);
+  ASSERT_EQ(nb.size(), 14u);
+  // The first level: the nearest view, then the other side's nearest.
+  EXPECT_EQ(std::min(nb[0], nb[1]), 99);
+  EXPECT_EQ(std::max(nb[0], nb[1]), 101);
+  std::vector<int> later(nb.begin() + 2, nb.end());
+  std::sort(later.begin(), later.end());
+  EXPECT_EQ(later, (std::vector<int>{86, 88, 90, 92, 94, 96, 104, 106, 108, 110, 112, 114}));
+  EXPECT_EQ(plan.Voters(s).size(), 42u);
+  EXPECT_EQ(plan.Voters(s).front(), 58);
+  EXPECT_EQ(plan.Voters(s).back(), 142);
+  for (int j : plan.Voters(s)) EXPECT_EQ(j % 2, 0);
+  EXPECT_EQ(plan.PhotoNeighbours(s).size(), 28u);
+  EXPECT_EQ(plan.depth.read_before_emit[s], 114);
+  // Views not selected have no entries; an end view has one side only.
+  EXPECT_TRUE(plan.DepthNeighbours(101).empty());
+  EXPECT_TRUE(plan.PhotoNeighbours(101).empty());
+  EXPECT_EQ(plan.DepthNeighbours(0).size(), 1u + 6u);  // view 1, then 4 .. 14
+  // Colour and carving frames: evenly spread over the selected views.
+  EXPECT_EQ(plan.color_frames, (std::vector<int>{0, 24, 50, 74, 100, 124, 150, 174}));
+  EXPECT_EQ(plan.carving_frames.size(), 24u);
+  for (int f : plan.carving_frames) EXPECT_TRUE(plan.Selected(f));
+  EXPECT_DOUBLE_EQ(plan.fusion.voxel_size, 0.4 / 256);
+}
+
+TEST(ReconstructionPlan, ViewSelectionCounts) {
+  PipelineOptions o;
+  // 0.25° apart: every second view (0.5°, exactly the step: kept up to rounding).
+  EXPECT_EQ(ReconstructionPlan::Compute(Arc(240, 0.25), Box(), o).views.size(), 120u);
+  // 0.12° (a 3000-frame loop's spacing): every fifth (0.6°), 0.48° being short of 0.5°.
+  const ReconstructionPlan p12 = ReconstructionPlan::Compute(Arc(300, 0.12), Box(), o);
+  EXPECT_EQ(p12.views.size(), 60u);
+  EXPECT_EQ(p12.views[1], 5);
+  // 0.75° (figurines) and 1.5° (the demo): every view.
+  EXPECT_EQ(ReconstructionPlan::Compute(Arc(100, 0.75), Box(), o).views.size(), 100u);
+  EXPECT_EQ(ReconstructionPlan::Compute(Arc(100, 1.5), Box(), o).views.size(), 100u);
+  // A smaller step keeps more; selection off keeps all.
+  o.selection.min_step_deg = 0.25;
+  EXPECT_EQ(ReconstructionPlan::Compute(Arc(300, 0.12), Box(), o).views.size(), 100u);  // every third (0.36°)
+  o.selection.enabled = false;
+  EXPECT_EQ(ReconstructionPlan::Compute(Arc(300, 0.12), Box(), o).views.size(), 300u);
+  // The flag mapping: --all-views turns it off; given views win over selection.
+  ReconstructionFlags f;
+  EXPECT_TRUE(OptionsFromFlags(f).selection.enabled);
+  f.all_views = true;
+  EXPECT_FALSE(OptionsFromFlags(f).selection.enabled);
+  PipelineOptions given;
+  given.views = {7, 3, 3};
+  EXPECT_EQ(ReconstructionPlan::Compute(Arc(20, 0.1), Box(), given).views, (std::vector<int>{3, 7}));
+  given.views = {20};
+  EXPECT_THROW(ReconstructionPlan::Compute(Arc(20, 0.1), Box(), given), OptionError);
+  PipelineOptions bad;
+  bad.selection.min_step_deg = -1;
+  EXPECT_THROW(bad.Check(), OptionError);
+}
+
+// Where views are >= 0.5° apart the grid holds every view and the depth
+// neighbours are every view within 5° (0.8°: 6 per side, 12), the voters every
+// view within 15° (18 per side, 36).
+TEST(ReconstructionPlan, SparseSequenceUsesEveryViewWithin5Degrees) {
+  const ReconstructionPlan plan = ReconstructionPlan::Compute(Arc(100, 0.8), Box(), PipelineOptions());
+  for (int k = 0; k < 100; ++k) EXPECT_TRUE(plan.OnGrid(k) && plan.Selected(k));
+  EXPECT_EQ(plan.DepthNeighbours(50).size(), 12u);
+  EXPECT_EQ(plan.Voters(50).size(), 36u);
+  EXPECT_EQ(plan.PhotoNeighbours(50).size(), 12u);
+}
+
+}  // namespace
+}  // namespace lfrecon
