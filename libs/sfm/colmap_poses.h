@@ -1,0 +1,60 @@
+#pragma once
+// Poses for every frame of a video or image sequence with COLMAP (Debian's
+// `colmap` 3.8, CPU) driven as a subprocess, written as a dataset folder that
+// `lfrecon run` opens: images/, sparse/ (COLMAP text, normalised world:
+// up = +z, origin at V's bottom centre, nominal scale), scene.json with V.
+//
+// Only every `step`-th frame goes through incremental SfM (feature_extractor
+// with one shared camera, sequential_matcher, a few loop-closure pairs, mapper);
+// the other frames are then extracted with the same camera, matched with their
+// nearest keyframes only and registered to the keyframe model
+// (image_registrator), so a long video does not pay for SfM on every frame.
+// COLMAP's workspace and per-step logs stay in OUT/colmap/.
+#include <filesystem>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include "sfm/world_frame.h"
+
+namespace lfrecon {
+
+struct ColmapPosesOptions {
+  std::filesystem::path video_path;  // frames from a video (OpenCV VideoCapture) ...
+  std::filesystem::path images_dir;  // ... or from an image folder (natural name order)
+  std::filesystem::path out_dir;     // the dataset folder written
+  int step = 3;                      // every step-th frame is a keyframe (SfM); the rest are registered
+  int max_frames = 0;                // use only the first N frames (0: all)
+  std::string colmap = "colmap";     // the COLMAP binary (looked up in PATH without a '/')
+  std::string camera_model = "SIMPLE_RADIAL";  // one camera for all frames: SIMPLE_RADIAL or PINHOLE
+  int threads = 0;                   // COLMAP's threads (0: all cores)
+  int max_num_features = 8192;       // SIFT features per frame
+  int overlap = 5;                   // keyframe k is matched with keyframes k+1 .. k+overlap
+  int loop_pairs = 5;                // the first and last loop_pairs keyframes are matched too (closes loops; 0: off)
+  int register_neighbours = 2;       // other frames: matched with this many keyframes before and after
+  bool bundle_adjust_all = false;    // a final bundle adjustment over every frame (slower)
+  std::string image_format = "png";  // frames extracted from a video: png or jpg (quality 95)
+  WorldFrameOptions world;
+
+  // Throws OptionError naming the field.
+  void Check() const;
+};
+
+struct ColmapPosesSummary {
+  int frames = 0;
+  int keyframes = 0;
+  int keyframes_registered = 0;  // in the keyframe model
+  int registered = 0;            // frames with a pose in the dataset
+  std::vector<std::string> unregistered;
+  std::vector<std::pair<std::string, double>> step_seconds;  // frames, feature_extractor, ... in order
+  double seconds = 0;
+  WorldFrame world;
+  Camera camera;  // the estimated camera (normalised world: unchanged intrinsics)
+};
+
+// Throws ExternalToolError naming the binary when COLMAP is missing or a step
+// fails (with its exit status and last output lines), InputError for an
+// unreadable video/image folder or a model without usable frames.
+ColmapPosesSummary EstimatePosesWithColmap(const ColmapPosesOptions& options);
+
+}  // namespace lfrecon
