@@ -19,6 +19,7 @@ PACKAGES=(
   clang-14 libclang-rt-14-dev
   libceres-dev
   jq
+  colmap
 )
 
 missing=()
