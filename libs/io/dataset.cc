@@ -7,8 +7,11 @@
 #include <cmath>
 #include <cstdio>
 #include <fstream>
+#include <limits>
 #include <map>
 #include <nlohmann/json.hpp>
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
 #include <set>
 
 #include "geometry/undistorter.h"
@@ -89,7 +92,7 @@ class DatasetFrameSource : public FrameSource {
       std::vector<cv::Size> sizes;  // each image's header is checked against its camera before decoding
       for (const DatasetView& v : views_) {
         names.push_back(v.name);
-        sizes.emplace_back(v.camera.width, v.camera.height);
+        sizes.emplace_back(v.source_width, v.source_height);
       }
       auto folder = std::make_unique<ImageFolderSource>(images_dir_, std::move(names));
       folder->ExpectSizes(std::move(sizes));
@@ -125,17 +128,23 @@ class DatasetFrameSource : public FrameSource {
   void Finish(int index, Frame* frame) {
     const DatasetView& view = views_[index];
     const Camera& camera = view.camera;
-    if (frame->image.cols != camera.width || frame->image.rows != camera.height) {
+    if (frame->image.cols != view.source_width || frame->image.rows != view.source_height) {
       const std::string file =
           video_path_.empty() ? (images_dir_ / view.name).string() : video_path_.string();
       const std::string field = video_path_.empty() ? "" : "frame " + std::to_string(index);
       throw InputError(file, field,
                        "image is " + std::to_string(frame->image.cols) + "x" +
                            std::to_string(frame->image.rows) + " but its camera (" + view.name + ") is " +
-                           std::to_string(camera.width) + "x" + std::to_string(camera.height));
+                           std::to_string(view.source_width) + "x" + std::to_string(view.source_height));
     }
     frame->index = index;
     frame->name = view.name;
+    if (camera.width != frame->image.cols || camera.height != frame->image.rows) {
+      // --max-image-size: area averaging, as the camera was scaled (Camera::Scaled).
+      cv::Mat small;
+      cv::resize(frame->image, small, cv::Size(camera.width, camera.height), 0, 0, cv::INTER_AREA);
+      frame->image = small;
+    }
     frame->image = UndistorterFor(camera).Apply(frame->image);
   }
 
@@ -158,7 +167,45 @@ struct PoseEntry {
   std::string name;
   Camera camera;
   Rigid3d cam_from_world;
+  fs::path mask_path;  // Nerfstudio mask_path, resolved; empty: none
 };
+
+// Nerfstudio-style split files, in this order, when a folder has no transforms.json.
+const char* const kTransformsSplits[] = {"transforms_train.json", "transforms_val.json", "transforms_test.json"};
+
+// The size of an image file from its PNG/JPEG header (the first 1 MiB is
+// enough for any JPEG's frame header after its EXIF data), else by decoding it.
+std::optional<std::pair<int, int>> ImageFileSize(const fs::path& path) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) return std::nullopt;
+  std::string bytes(1 << 20, '\0');
+  in.read(bytes.data(), static_cast<std::streamsize>(bytes.size()));
+  bytes.resize(static_cast<std::size_t>(in.gcount()));
+  if (const auto h = ReadImageHeader(bytes); h && h->width > 0 && h->height > 0)
+    return std::make_pair(h->width, h->height);
+  const cv::Mat image = cv::imread(path.string(), cv::IMREAD_UNCHANGED);
+  if (image.empty()) return std::nullopt;
+  return std::make_pair(image.cols, image.rows);
+}
+
+// PNG with an alpha channel (IHDR colour type 4 or 6).
+bool PngHasAlpha(const fs::path& path) {
+  std::ifstream in(path, std::ios::binary);
+  char b[26] = {};
+  if (!in.read(b, sizeof(b))) return false;
+  if (std::string(b + 1, 3) != "PNG" || std::string(b + 12, 4) != "IHDR") return false;
+  return b[25] == 4 || b[25] == 6;
+}
+
+// A mask file for image `name` in `dir`: NAME.png (COLMAP's convention), STEM.png, NAME.
+fs::path FindMaskFile(const fs::path& dir, const std::string& name) {
+  fs::path with_png = dir / name;
+  with_png += ".png";
+  const fs::path stem_png = (dir / name).replace_extension(".png");
+  for (const fs::path& p : {with_png, stem_png, dir / name})
+    if (IsFile(p)) return p;
+  return {};
+}
 
 }  // namespace
 
@@ -175,6 +222,14 @@ void DatasetOptions::Check() const {
           "no poses: give --colmap or --transforms with --images/--video (or a dataset folder)");
   }
   if (bbox && !bbox->IsValid()) throw OptionError("--bbox: min must be finite and below max on every axis");
+  if (max_image_size < 0) throw OptionError("--max-image-size must be positive (0: frames as stored)");
+}
+
+std::pair<int, int> ScaledImageSize(int width, int height, int max_size) {
+  const int longer = std::max(width, height);
+  if (max_size <= 0 || longer <= max_size) return {width, height};
+  const double s = static_cast<double>(max_size) / longer;
+  return {std::max(1, static_cast<int>(std::lround(width * s))), std::max(1, static_cast<int>(std::lround(height * s)))};
 }
 
 Dataset Dataset::Open(const DatasetOptions& options) {
@@ -188,6 +243,7 @@ Dataset Dataset::Open(const DatasetOptions& options) {
 
   // Where the poses come from: explicit, else COLMAP in the dataset folder, else its transforms.json.
   fs::path model_dir, transforms_path = options.transforms_path;
+  std::vector<fs::path> split_files;  // Nerfstudio splits, all read (transforms_path is the first)
   if (!options.colmap_dir.empty()) {
     if (!IsDir(options.colmap_dir))
       throw InputError(options.colmap_dir.string(), "COLMAP model folder does not exist");
@@ -201,10 +257,17 @@ Dataset Dataset::Open(const DatasetOptions& options) {
   } else {
     model_dir = FindColmapModel(root);
     if (model_dir.empty()) {
-      if (!IsFile(root / "transforms.json"))
-        throw InputError(root.string(),
-                         "no poses: expected a COLMAP model in sparse/ or sparse/0/, or transforms.json");
-      transforms_path = root / "transforms.json";
+      if (IsFile(root / "transforms.json")) {
+        transforms_path = root / "transforms.json";
+      } else {
+        for (const char* split : kTransformsSplits)
+          if (IsFile(root / split)) split_files.push_back(root / split);
+        if (split_files.empty())
+          throw InputError(root.string(),
+                           "no poses: expected a COLMAP model in sparse/ or sparse/0/, transforms.json, or "
+                           "Nerfstudio split files (transforms_train.json, transforms_val.json, transforms_test.json)");
+        transforms_path = split_files.front();
+      }
     } else if (IsFile(root / "transforms.json")) {
       spdlog::info("{}: using the COLMAP model in {}, not transforms.json", root.string(),
                    model_dir.string());
@@ -237,19 +300,64 @@ Dataset Dataset::Open(const DatasetOptions& options) {
     for (const ColmapImage& image : model.images)
       entries.push_back({image.name, model.cameras.at(image.camera_id), image.cam_from_world});
   } else {
-    ds.pose_source_ = "transforms.json";
-    pose_file = transforms_path.string();
-    const std::vector<TransformsFrame> frames = ReadTransformsJson(transforms_path);
-    const fs::path base = transforms_path.parent_path();
-    for (size_t i = 0; i < frames.size(); ++i) {
-      std::string name = frames[i].file_path;
-      if (ds.video_path_.empty()) {
-        name = ResolveTransformsImage(frames[i].file_path, base, ds.images_dir_);
-        if (name.empty())
-          throw InputError(pose_file, "frames[" + std::to_string(i) + "].file_path",
-                           "'" + frames[i].file_path + "' matches no image in " + ds.images_dir_.string());
+    ds.pose_source_ = split_files.size() > 1 ? "transforms splits" : transforms_path.filename().string();
+    if (split_files.empty()) split_files.push_back(transforms_path);
+    std::optional<std::pair<int, int>> video_size;
+    for (const fs::path& file : split_files) {
+      pose_file = file.string();
+      const fs::path base = file.parent_path();
+      // Files without w/h: each image's own size (the video's for a video).
+      const TransformsImageSize image_size = [&](const std::string& file_path) -> std::optional<std::pair<int, int>> {
+        if (!ds.video_path_.empty()) {
+          if (!video_size) {
+            VideoSource video(ds.video_path_);
+            Frame f;
+            if (video.Next(&f)) video_size = std::make_pair(f.image.cols, f.image.rows);
+          }
+          return video_size;
+        }
+        const std::string name = ResolveTransformsImage(file_path, base, ds.images_dir_);
+        if (name.empty()) return std::nullopt;
+        return ImageFileSize(ds.images_dir_ / name);
+      };
+      const std::vector<TransformsFrame> frames = ReadTransformsJson(file, image_size);
+      for (size_t i = 0; i < frames.size(); ++i) {
+        std::string name = frames[i].file_path;
+        if (ds.video_path_.empty()) {
+          name = ResolveTransformsImage(frames[i].file_path, base, ds.images_dir_);
+          if (name.empty())
+            throw InputError(pose_file, "frames[" + std::to_string(i) + "].file_path",
+                             "'" + frames[i].file_path + "' matches no image in " + ds.images_dir_.string());
+        }
+        PoseEntry e{name, frames[i].camera, frames[i].cam_from_world, {}};
+        if (!frames[i].mask_path.empty()) {
+          // Like image names, a mask path stays below the transforms file's folder.
+          const fs::path mp = fs::path(frames[i].mask_path).lexically_normal();
+          bool escapes = mp.is_absolute() || mp.has_root_name() || mp.has_root_directory();
+          for (const fs::path& part : mp) escapes = escapes || part == "..";
+          if (escapes)
+            throw InputError(pose_file, "frames[" + std::to_string(i) + "].mask_path",
+                             "'" + frames[i].mask_path + "' leaves the dataset folder (absolute or '..')");
+          e.mask_path = base / mp;
+          if (!IsFile(e.mask_path))
+            throw InputError(pose_file, "frames[" + std::to_string(i) + "].mask_path",
+                             "'" + frames[i].mask_path + "' does not exist");
+        }
+        entries.push_back(std::move(e));
       }
-      entries.push_back({name, frames[i].camera, frames[i].cam_from_world});
+    }
+    if (split_files.size() > 1) {
+      pose_file = root.string() + "/transforms_*.json";
+      // The same image in two splits with the same pose is one view.
+      std::sort(entries.begin(), entries.end(),
+                [](const PoseEntry& a, const PoseEntry& b) { return NaturalNameLess(a.name, b.name); });
+      entries.erase(std::unique(entries.begin(), entries.end(),
+                                [](const PoseEntry& a, const PoseEntry& b) {
+                                  return a.name == b.name && SameCamera(a.camera, b.camera) &&
+                                         a.cam_from_world.ToMatrix() == b.cam_from_world.ToMatrix();
+                                }),
+                    entries.end());
+      spdlog::info("{}: {} views from {} split files", root.string(), entries.size(), split_files.size());
     }
   }
   if (entries.empty()) throw InputError(pose_file, "no poses in the file");
@@ -298,14 +406,47 @@ Dataset Dataset::Open(const DatasetOptions& options) {
                                                     "name order, so the counts must agree");
   }
 
+  // Masks: Nerfstudio's mask_path, else a mask folder, else the images' alpha channel.
+  fs::path masks_dir = options.masks_dir;
+  if (!masks_dir.empty() && !IsDir(masks_dir)) throw InputError(masks_dir.string(), "mask folder does not exist");
+  if (masks_dir.empty() && !root.empty() && IsDir(root / "masks")) masks_dir = root / "masks";
+  bool any_mask_path = false;
+  for (const PoseEntry& e : entries) any_mask_path = any_mask_path || !e.mask_path.empty();
+  if (any_mask_path) {
+    ds.mask_source_ = "mask_path";
+  } else if (!masks_dir.empty()) {
+    int found = 0;
+    for (PoseEntry& e : entries) {
+      e.mask_path = FindMaskFile(masks_dir, e.name);
+      found += !e.mask_path.empty();
+    }
+    if (found > 0) {
+      ds.mask_source_ = "masks/";
+      if (found < static_cast<int>(entries.size()))
+        spdlog::warn("{}: masks for {} of {} views", masks_dir.string(), found, entries.size());
+    } else {
+      spdlog::warn("{}: no mask matches an image name (NAME.png, STEM.png or NAME)", masks_dir.string());
+    }
+  } else if (ds.video_path_.empty() && PngHasAlpha(ds.images_dir_ / entries.front().name)) {
+    ds.mask_source_ = "alpha";
+  }
+
   for (size_t i = 0; i < entries.size(); ++i) {
     DatasetView v;
     v.index = static_cast<int>(i);
     v.name = std::move(entries[i].name);
-    v.camera = std::move(entries[i].camera);
+    v.source_width = entries[i].camera.width;
+    v.source_height = entries[i].camera.height;
+    const auto [w, h] = ScaledImageSize(v.source_width, v.source_height, options.max_image_size);
+    v.camera = entries[i].camera.Scaled(w, h);
     v.cam_from_world = entries[i].cam_from_world;
+    v.mask_path = std::move(entries[i].mask_path);
     ds.views_.push_back(std::move(v));
   }
+  if (options.max_image_size > 0 && ds.views_.front().camera.width != ds.views_.front().source_width)
+    spdlog::info("frames read at {}x{} (stored {}x{}; --max-image-size {})", ds.views_.front().camera.width,
+                 ds.views_.front().camera.height, ds.views_.front().source_width, ds.views_.front().source_height,
+                 options.max_image_size);
 
   // The foreground volume V.
   if (options.bbox) {
@@ -329,6 +470,29 @@ Dataset Dataset::Open(const DatasetOptions& options) {
     } else {
       ds.bbox_ = EstimateBoundingBox(ds.views_);
       ds.bbox_source_ = "estimated";
+      if (ds.HasMasks()) {
+        // The visual hull of up to 32 masked views spread over the sequence, searched
+        // in a cube around the cameras' look-at point reaching the cameras.
+        std::vector<PinholeView> views;
+        std::vector<cv::Mat> masks;
+        const int n = ds.NumViews(), take = std::min(n, 32);
+        for (int k = 0; k < take; ++k) {
+          const int i = static_cast<int>(static_cast<long long>(k) * n / take);
+          views.push_back(ds.View(i));
+          masks.push_back(ds.ReadMask(i));
+        }
+        double distance = 0;
+        for (const PinholeView& v : views) distance = std::max(distance, (v.Center() - ds.bbox_.Center()).norm());
+        BoundingBox search;
+        search.min = ds.bbox_.Center() - Eigen::Vector3d::Constant(distance);
+        search.max = ds.bbox_.Center() + Eigen::Vector3d::Constant(distance);
+        if (auto box = BoundingBoxFromMasks(views, masks, search)) {
+          ds.bbox_ = *box;
+          ds.bbox_source_ = "masks (" + ds.mask_source_ + ")";
+        } else {
+          spdlog::warn("the masks' visual hull is empty (masks inverted, or poses wrong?); V estimated from the cameras");
+        }
+      }
     }
   }
   spdlog::info("{}: {} views, poses from {}, V from {}: [{:.3f} {:.3f} {:.3f}] - [{:.3f} {:.3f} {:.3f}]",
@@ -337,6 +501,38 @@ Dataset Dataset::Open(const DatasetOptions& options) {
                ds.views_.size(), ds.pose_source_, ds.bbox_source_, ds.bbox_.min.x(), ds.bbox_.min.y(),
                ds.bbox_.min.z(), ds.bbox_.max.x(), ds.bbox_.max.y(), ds.bbox_.max.z());
   return ds;
+}
+
+cv::Mat Dataset::ReadMask(int i) const {
+  const DatasetView& v = views_.at(i);
+  cv::Mat raw;
+  std::string file;
+  if (!v.mask_path.empty()) {
+    file = v.mask_path.string();
+    // IMREAD_IGNORE_ORIENTATION as for the frames (COLMAP ignores EXIF orientation).
+    raw = cv::imread(file, cv::IMREAD_GRAYSCALE | cv::IMREAD_IGNORE_ORIENTATION);
+    if (raw.empty()) throw InputError(file, "mask cannot be read");
+  } else if (mask_source_ == "alpha") {
+    file = ImagePath(i).string();
+    const cv::Mat image = cv::imread(file, cv::IMREAD_UNCHANGED);
+    if (image.empty()) throw InputError(file, "image cannot be read");
+    if (image.channels() != 4 && image.channels() != 2) return cv::Mat();
+    cv::extractChannel(image, raw, image.channels() - 1);
+    if (raw.depth() != CV_8U) raw.convertTo(raw, CV_8U, 255.0 / 65535.0);
+  } else {
+    return cv::Mat();
+  }
+  if (raw.cols != v.source_width || raw.rows != v.source_height)
+    throw InputError(file, "mask is " + std::to_string(raw.cols) + "x" + std::to_string(raw.rows) +
+                               " but its image (" + v.name + ") is " + std::to_string(v.source_width) + "x" +
+                               std::to_string(v.source_height));
+  cv::Mat m = raw;
+  if (v.camera.width != raw.cols || v.camera.height != raw.rows)
+    cv::resize(raw, m, cv::Size(v.camera.width, v.camera.height), 0, 0, cv::INTER_AREA);
+  if (v.camera.HasDistortion()) m = Undistorter(v.camera).Apply(m);
+  cv::Mat out;
+  cv::threshold(m, out, 127, 255, cv::THRESH_BINARY);
+  return out;
 }
 
 fs::path Dataset::ImagePath(int i) const {
@@ -440,6 +636,57 @@ BoundingBox EstimateBoundingBox(const std::vector<DatasetView>& views) {
   BoundingBox box;
   box.min = center - Eigen::Vector3d::Constant(half);
   box.max = center + Eigen::Vector3d::Constant(half);
+  return box;
+}
+
+namespace {
+
+// Grid search of the visual hull's bounds inside `box`, `n` cells a side.
+std::optional<BoundingBox> HullBounds(const std::vector<PinholeView>& views, const std::vector<cv::Mat>& masks,
+                                      const BoundingBox& box, int n) {
+  int masked = 0;
+  for (const cv::Mat& m : masks) masked += !m.empty();
+  const Eigen::Vector3d cell = box.Extent() / n;
+  Eigen::Vector3d lo = Eigen::Vector3d::Constant(std::numeric_limits<double>::infinity());
+  Eigen::Vector3d hi = -lo;
+  bool any = false;
+  for (int z = 0; z < n; ++z)
+    for (int y = 0; y < n; ++y)
+      for (int x = 0; x < n; ++x) {
+        const Eigen::Vector3d p = box.min + cell.cwiseProduct(Eigen::Vector3d(x + 0.5, y + 0.5, z + 0.5));
+        int seen = 0;
+        bool inside = true;
+        for (size_t k = 0; k < views.size() && inside; ++k) {
+          if (masks[k].empty()) continue;
+          Eigen::Vector2d px;
+          if (views[k].Project(p, &px) <= 0 || !views[k].InImage(px)) continue;
+          ++seen;
+          inside = masks[k].at<std::uint8_t>(static_cast<int>(px.y()), static_cast<int>(px.x())) != 0;
+        }
+        if (!inside || 2 * seen < masked) continue;
+        lo = lo.cwiseMin(p);
+        hi = hi.cwiseMax(p);
+        any = true;
+      }
+  if (!any) return std::nullopt;
+  BoundingBox out;
+  out.min = lo - cell;
+  out.max = hi + cell;
+  return out;
+}
+
+}  // namespace
+
+std::optional<BoundingBox> BoundingBoxFromMasks(const std::vector<PinholeView>& views,
+                                                const std::vector<cv::Mat>& masks, const BoundingBox& search) {
+  if (views.size() != masks.size()) throw std::invalid_argument("BoundingBoxFromMasks: one mask per view");
+  auto coarse = HullBounds(views, masks, search, 96);
+  if (!coarse) return std::nullopt;
+  auto fine = HullBounds(views, masks, *coarse, 96);
+  BoundingBox box = fine ? *fine : *coarse;
+  const Eigen::Vector3d margin = 0.05 * box.Extent();
+  box.min -= margin;
+  box.max += margin;
   return box;
 }
 

@@ -205,13 +205,18 @@ cv::Mat ReadImageFloat(const fs::path& path, std::optional<cv::Size> expect) {
   }
   cv::Mat raw;
   try {
-    // IMREAD_UNCHANGED: keep 16-bit data and ignore EXIF orientation, as COLMAP does,
-    // so that image sizes agree with the cameras. PNG/JPEG from the bytes read;
-    // other formats from the file (some OpenCV decoders read files only).
+    // EXIF orientation is ignored, as COLMAP does: its Bitmap::Read opens images
+    // with OpenImageIO's "oiio:reorient" = 0 (src/colmap/sensor/bitmap.cc; FreeImage
+    // in older versions did not rotate either), so its cameras and poses describe
+    // the pixels as stored. IMREAD_UNCHANGED (keeps 16-bit data) already skips
+    // OpenCV's EXIF rotation; IMREAD_IGNORE_ORIENTATION says so explicitly.
+    // PNG/JPEG from the bytes read; other formats from the file (some OpenCV
+    // decoders read files only).
+    const int flags = cv::IMREAD_UNCHANGED | cv::IMREAD_IGNORE_ORIENTATION;
     if (header)
-      raw = cv::imdecode(cv::Mat(1, static_cast<int>(bytes.size()), CV_8U, bytes.data()), cv::IMREAD_UNCHANGED);
+      raw = cv::imdecode(cv::Mat(1, static_cast<int>(bytes.size()), CV_8U, bytes.data()), flags);
     else
-      raw = cv::imread(file, cv::IMREAD_UNCHANGED);
+      raw = cv::imread(file, flags);
   } catch (const cv::Exception& e) {
     throw InputError(file, std::string("image cannot be decoded: ") + e.what());
   }

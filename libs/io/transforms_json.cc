@@ -44,9 +44,15 @@ struct IntrinsicsKeys {
   }
 };
 
-Camera ParseCamera(const IntrinsicsKeys& keys) {
-  const double w = keys.Required("w");
-  const double h = keys.Required("h");
+Camera ParseCamera(const IntrinsicsKeys& keys, const std::optional<std::pair<int, int>>& image_size) {
+  double w, h;
+  if (!keys.Number("w") && !keys.Number("h") && image_size) {
+    w = image_size->first;
+    h = image_size->second;
+  } else {
+    w = keys.Required("w");
+    h = keys.Required("h");
+  }
   if (w < 1 || h < 1 || w != std::floor(w) || h != std::floor(h) || w > 1e6 || h > 1e6)
     throw InputError(keys.file, keys.field + "w/h", "image size must be positive integers");
   double fx, fy;
@@ -66,17 +72,22 @@ Camera ParseCamera(const IntrinsicsKeys& keys) {
   }
   const double cx = keys.Number("cx").value_or(0.5 * w);
   const double cy = keys.Number("cy").value_or(0.5 * h);
+  bool fisheye = false;
   if (const json* m = keys.Find("camera_model")) {
     const std::string name = m->is_string() ? m->get<std::string>() : m->dump();
-    if (name != "OPENCV" && name != "PINHOLE" && name != "SIMPLE_PINHOLE")
+    if (name != "OPENCV" && name != "PINHOLE" && name != "SIMPLE_PINHOLE" && name != "OPENCV_FISHEYE")
       throw InputError(keys.file, keys.field + "camera_model",
-                       "unsupported camera model '" + name + "' (supported: PINHOLE, OPENCV)");
+                       "unsupported camera model '" + name + "' (supported: PINHOLE, OPENCV, OPENCV_FISHEYE)");
+    fisheye = name == "OPENCV_FISHEYE";
   }
   const double k1 = keys.Number("k1").value_or(0), k2 = keys.Number("k2").value_or(0);
   const double p1 = keys.Number("p1").value_or(0), p2 = keys.Number("p2").value_or(0);
-  const double k3 = keys.Number("k3").value_or(0);
+  const double k3 = keys.Number("k3").value_or(0), k4 = keys.Number("k4").value_or(0);
   Camera camera;
-  if (k3 != 0) {
+  if (fisheye) {
+    camera.model = CameraModelId::kOpenCVFisheye;
+    camera.params = {fx, fy, cx, cy, k1, k2, k3, k4};
+  } else if (k3 != 0) {
     camera.model = CameraModelId::kFullOpenCV;
     camera.params = {fx, fy, cx, cy, k1, k2, p1, p2, k3, 0, 0, 0};
   } else if (k1 != 0 || k2 != 0 || p1 != 0 || p2 != 0) {
@@ -161,13 +172,22 @@ void PutIntrinsics(const Camera& camera, json* out) {
       j["p1"] = p[6];
       j["p2"] = p[7];
       break;
+    case CameraModelId::kOpenCVFisheye:
+      j["k1"] = p[4];
+      j["k2"] = p[5];
+      j["k3"] = p[6];
+      j["k4"] = p[7];
+      j["camera_model"] = "OPENCV_FISHEYE";
+      return;
+    default:
+      throw std::invalid_argument("transforms.json cannot hold a " + CameraModelName(camera.model) + " camera");
   }
   if (camera.HasDistortion()) j["camera_model"] = "OPENCV";
 }
 
 }  // namespace
 
-std::vector<TransformsFrame> ReadTransformsJson(const fs::path& path) {
+std::vector<TransformsFrame> ReadTransformsJson(const fs::path& path, const TransformsImageSize& image_size) {
   const std::string file = path.string();
   const json root = ReadJsonFile(path);  // depth-limited: no recursion on untrusted nesting
   if (!root.is_object() || !root.contains("frames") || !root["frames"].is_array())
@@ -184,7 +204,14 @@ std::vector<TransformsFrame> ReadTransformsJson(const fs::path& path) {
     TransformsFrame frame;
     frame.file_path = f["file_path"].get<std::string>();
     field += " (" + frame.file_path + ").";
-    frame.camera = ParseCamera(IntrinsicsKeys{&f, &root, file, field});
+    if (f.contains("mask_path")) {
+      if (!f["mask_path"].is_string()) throw InputError(file, field + "mask_path", "must be a string");
+      frame.mask_path = f["mask_path"].get<std::string>();
+    }
+    const IntrinsicsKeys keys{&f, &root, file, field};
+    std::optional<std::pair<int, int>> size;
+    if (!keys.Number("w") && !keys.Number("h") && image_size) size = image_size(frame.file_path);
+    frame.camera = ParseCamera(keys, size);
     frame.cam_from_world = ParsePose(f, file, field);
     frames.push_back(std::move(frame));
   }

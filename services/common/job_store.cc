@@ -4,6 +4,7 @@
 #include <sys/file.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstring>
@@ -396,6 +397,7 @@ DatasetOptions ToDatasetOptions(const pb::JobSpec& spec) {
   d.video_path = spec.video_path();
   d.colmap_dir = spec.colmap_dir();
   d.transforms_path = spec.transforms_path();
+  d.max_image_size = static_cast<int>(std::min<std::uint32_t>(spec.max_image_size(), 1u << 20));
   if (spec.bbox_size() != 0) {
     if (spec.bbox_size() != 6) throw OptionError("bbox needs 6 numbers, got " + std::to_string(spec.bbox_size()));
     BoundingBox b;

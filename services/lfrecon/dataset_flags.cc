@@ -12,6 +12,13 @@ void DatasetFlags::AddTo(CLI::App* app) {
   app->add_option("--colmap", options.colmap_dir, "COLMAP sparse model folder (text or binary)");
   app->add_option("--transforms", options.transforms_path, "NeRF-style transforms.json");
   app->add_option("--bbox", bbox, "Foreground volume V: xmin ymin zmin xmax ymax zmax (metres)")->expected(6);
+  app->add_option("--masks", options.masks_dir,
+                  "Foreground mask folder (NAME.png, STEM.png or NAME per image, 255 = object; default DATASET/masks/). "
+                  "A Nerfstudio frame's mask_path comes first, a PNG alpha channel last. Without --bbox or "
+                  "scene.json, V is the masks' visual hull");
+  app->add_option("--max-image-size", options.max_image_size,
+                  "Downscale frames on read (INTER_AREA) so that their longer side is at most N pixels; "
+                  "cameras scaled with them (0: as stored)");
 }
 
 DatasetOptions DatasetFlags::Resolve() const {

@@ -159,6 +159,9 @@ void AddServiceCommands(CLI::App& root, int* exit_code) {
       spec->set_video_path(Abs(d.video_path));
       spec->set_colmap_dir(Abs(d.colmap_dir));
       spec->set_transforms_path(Abs(d.transforms_path));
+      if (!d.masks_dir.empty())
+        throw OptionError("--masks: the service reads masks from the dataset folder (DATASET/masks/ or mask_path) only");
+      spec->set_max_image_size(static_cast<std::uint32_t>(d.max_image_size));
       for (double v : a->data.bbox) spec->add_bbox(v);
       spec->mutable_options()->set_voxel_size(a->voxel_mm / 1000.0);
       spec->mutable_options()->set_sigma_s(a->sigma_s);
