@@ -416,6 +416,9 @@ int main(int argc, char** argv) {
   std::vector<int> min_views_list = {1};
   bool refine = false, analyze = false;
   double consistency = -1;
+  double oracle_clean_mm = -1;
+  double measured_floor = 0;
+  fs::path measured_dir;  // < 0: off; 0: GT views only, uncleaned; > 0: also drop |d - gt| > MM
   std::vector<std::string> variants;
   std::vector<double> min_comp_cm2;
   std::vector<Eigen::Vector3d> probes;
@@ -445,6 +448,10 @@ int main(int argc, char** argv) {
       std::stringstream ss(v);
       std::string item;
       while (std::getline(ss, item, ',')) clamps.push_back(std::atof(item.c_str()));
+    } else if (k == "--measured-bg-floor") {  // F,DIR: floor only where DIR's (filtered) maps measured background
+      const auto comma = v.find(',');
+      measured_floor = std::atof(v.substr(0, comma).c_str());
+      if (comma != std::string::npos) measured_dir = v.substr(comma + 1);
     } else if (k == "--bg-confidence-floor") {
       bg_floor = std::atof(v.c_str());
     } else if (k == "--band") {
@@ -479,6 +486,8 @@ int main(int argc, char** argv) {
       }
     } else if (k == "--dense-consistency") {  // views,rho_min: CheckDenseConsistency on the loaded maps
       std::sscanf(v.c_str(), "%d,%lf,%d", &cons_views, &cons_min, &cons_radius);
+    } else if (k == "--oracle-clean") {  // diagnosis: keep only views with GT depth; drop depths off it by > MM
+      oracle_clean_mm = std::atof(v.c_str());
     } else if (k == "--analyze") {
       analyze = std::atoi(v.c_str()) != 0;
     } else if (k == "--keep-mesh") {
@@ -533,6 +542,41 @@ int main(int argc, char** argv) {
     maps.push_back(std::move(m));
   }
   std::printf("%zu depth maps from %s\n", maps.size(), depth_dir.c_str());
+  if (oracle_clean_mm >= 0) {
+    // What the fusion would give from depth maps without their errors: only
+    // views with ground-truth depth are kept; with MM > 0 every depth more than
+    // MM from the truth there (or where the truth has no surface) is dropped, of the depths inside V
+    // (foreground; background depths keep giving free space).
+    std::vector<int> kept_ids;
+    std::vector<DepthMap> kept;
+    long long dropped_front = 0, dropped_behind = 0, total = 0;
+    for (std::size_t k = 0; k < maps.size(); ++k) {
+      const auto gt_depth = ds.GroundTruthDepthPath(ids[k]);
+      if (!gt_depth) continue;
+      if (oracle_clean_mm > 0) {
+        const cv::Mat g = ReadDepthMap(*gt_depth);
+        for (int r = 0; r < maps[k].depth.rows; ++r)
+          for (int c = 0; c < maps[k].depth.cols; ++c) {
+            float& d = maps[k].depth.at<float>(r, c);
+            if (!(d > 0)) continue;
+            if (!ds.bbox().Contains(ds.View(ids[k]).Unproject(Eigen::Vector2d(c + 0.5, r + 0.5), d))) continue;
+            ++total;
+            const double t = g.at<float>(r, c);
+            const bool off = !(t > 0) || std::abs(d - t) > oracle_clean_mm / 1000;
+            if (!off) continue;
+            (t > 0 && d > t ? dropped_behind : dropped_front)++;
+            d = 0;
+            if (!maps[k].confidence.empty()) maps[k].confidence.at<float>(r, c) = 0;
+          }
+      }
+      kept_ids.push_back(ids[k]);
+      kept.push_back(std::move(maps[k]));
+    }
+    ids = std::move(kept_ids);
+    maps = std::move(kept);
+    std::printf("oracle: %zu views with ground-truth depth; %.4f of depths dropped in front of the truth, %.4f behind\n",
+                maps.size(), double(dropped_front) / std::max(1LL, total), double(dropped_behind) / std::max(1LL, total));
+  }
   if (maps.empty()) return 1;
   if (cons_views > 0) {
     // The dense maps' foreground depths checked against the frames (as
@@ -570,6 +614,32 @@ int main(int argc, char** argv) {
     }
     std::printf("dense consistency (%d views, rho_min %.2f, patch radius %d px): %.3f of the depths removed, %.1f s\n",
                 cons_views, cons_min, cons_radius, 1.0 - double(after) / std::max(1LL, before), ct.Seconds());
+  }
+  if (measured_floor > 0) {
+    // Background depths of the dense maps get at least this confidence where
+    // the filtered (sparse) map of the same view measured a background depth
+    // itself (not propagated).
+    std::size_t raised = 0, measured = 0;
+    for (std::size_t k = 0; k < maps.size(); ++k) {
+      const PinholeView view = ds.View(ids[k]);
+      const fs::path f = measured_dir / "depth" / (fs::path(ds.views()[ids[k]].name).stem().string() + ".pfm");
+      if (!fs::exists(f) || maps[k].confidence.empty()) continue;
+      const cv::Mat sparse = ReadPfm(f);
+      for (int r = 0; r < maps[k].depth.rows; ++r)
+        for (int c = 0; c < maps[k].depth.cols; ++c) {
+          const float ds_ = sparse.at<float>(r, c);
+          if (!(ds_ > 0) || ds.bbox().Contains(view.Unproject(Eigen::Vector2d(c + 0.5, r + 0.5), ds_))) continue;
+          ++measured;
+          const float d = maps[k].depth.at<float>(r, c);
+          float& cf = maps[k].confidence.at<float>(r, c);
+          if (d <= 0 || cf >= measured_floor) continue;
+          if (ds.bbox().Contains(view.Unproject(Eigen::Vector2d(c + 0.5, r + 0.5), d))) continue;
+          cf = static_cast<float>(measured_floor);
+          ++raised;
+        }
+    }
+    std::printf("measured background floor %.3f: %zu measured background pixels, %zu raised\n", measured_floor,
+                measured, raised);
   }
   if (bg_floor > 0) {  // depths beyond V (background) get at least this confidence
     std::size_t raised = 0;

@@ -1,0 +1,114 @@
+// A thin rod (1.8 mm radius, ~1.3 px wide here) standing before a strongly
+// textured floor and dome: the reconstruction keeps the rod (thin recall) and
+// adds no surface coloured like the background around it (precision inside V,
+// the rod's 6 x 6 cm column, where a halo or a fin of background texture
+// fused as surface would land). Clean frames and a degraded copy (noise,
+// JPEG, exposure drift, pose error, refined poses), 64 frames of 320x180
+// over a fifth of a loop (1.1° apart).
+#include <gtest/gtest.h>
+
+#include <cstdio>
+#include <opencv2/imgcodecs.hpp>
+
+#include "eval/mesh_metrics.h"
+#include "pipeline/embedded_pipeline.h"
+#include "poses/pose_refinement.h"
+#include "synth/sequence.h"
+
+namespace lfrecon {
+namespace {
+
+// Frames through a JPEG round trip at `quality`.
+class JpegSource : public FrameSource {
+ public:
+  JpegSource(std::unique_ptr<FrameSource> source, int quality) : source_(std::move(source)), quality_(quality) {}
+  int NumFrames() const override { return source_->NumFrames(); }
+  bool Next(Frame* frame) override {
+    if (!source_->Next(frame)) return false;
+    Encode(frame);
+    return true;
+  }
+  Frame Read(int index) override {
+    Frame f = source_->Read(index);
+    Encode(&f);
+    return f;
+  }
+
+ private:
+  void Encode(Frame* f) const {
+    cv::Mat u8;
+    f->image.convertTo(u8, CV_8UC3, 255.0);
+    std::vector<uchar> bytes;
+    cv::imencode(".jpg", u8, bytes, {cv::IMWRITE_JPEG_QUALITY, quality_});
+    cv::imdecode(bytes, cv::IMREAD_COLOR).convertTo(f->image, CV_32FC3, 1.0 / 255.0);
+  }
+  std::unique_ptr<FrameSource> source_;
+  int quality_;
+};
+
+synth::SynthSequence Rod(bool degraded) {
+  synth::SynthOptions o;
+  o.scene = "thin_cylinder";
+  o.frames = 64;
+  o.loops = 0.2;
+  o.width = 320;
+  o.height = 180;
+  o.render.noise_sigma = degraded ? 0.01 : 0.005;
+  if (degraded) {
+    o.degradation.exposure_drift = 0.04;
+    // At 320 px a pixel is twice the figurines' (640 px): the figurines-noisy
+    // pose error scaled with it.
+    o.degradation.pose_rotation_deg = 0.04;
+    o.degradation.pose_translation_mm = 1.0;
+  }
+  return synth::SynthSequence::Create(o);
+}
+
+struct Outcome {
+  double precision = 0, recall = 0, thin_recall = 0;
+  std::size_t triangles = 0;
+};
+
+Outcome Reconstruct(const synth::SynthSequence& seq, bool degraded) {
+  std::vector<PinholeView> views;
+  for (int i = 0; i < seq.NumFrames(); ++i) views.emplace_back(seq.camera(), seq.given_cam_from_world(i));
+  auto source = [&]() -> std::unique_ptr<FrameSource> {
+    if (degraded) return std::make_unique<JpegSource>(seq.OpenFrames(), 80);
+    return seq.OpenFrames();
+  };
+  if (degraded) {
+    auto frames = source();
+    views = RefinePoses(*frames, views, PoseRefinementOptions{}).views;
+  }
+  PipelineOptions options;
+  options.color_views = 0;
+  EmbeddedPipeline pipeline(views, seq.scene().foreground_bbox(), options);
+  auto frames = source();
+  const PipelineResult r = pipeline.Run(*frames);
+  MeshMetricsOptions mo;
+  mo.thresholds = {0.005};
+  mo.volume = seq.scene().foreground_bbox();
+  const TriangleMesh thin = seq.GroundTruthMesh(true);
+  const MeshMetrics m = EvaluateMesh(r.mesh, seq.GroundTruthMesh(), &thin, mo);
+  return {m.scores[0].precision, m.scores[0].recall, m.scores[0].thin_recall, r.mesh.triangles.size()};
+}
+
+TEST(ThinRod, KeptWithoutBackgroundSheetsCleanAndDegraded) {
+  const Outcome clean = Reconstruct(Rod(false), false);
+  const Outcome degraded = Reconstruct(Rod(true), true);
+  std::printf("thin rod @5mm: clean P %.3f R %.3f thin R %.3f (%zu triangles); degraded P %.3f R %.3f thin R %.3f "
+              "(%zu triangles)\n",
+              clean.precision, clean.recall, clean.thin_recall, clean.triangles, degraded.precision, degraded.recall,
+              degraded.thin_recall, degraded.triangles);
+  // Measured 2026-12-02: clean P 0.999, thin R 0.404; degraded P 0.995, thin
+  // R 0.356 (the rod is ~1.3 px wide here: half of it is found; at 640 px
+  // the figurines' thin parts reach 0.85). A background-coloured sheet or
+  // halo around the rod drops P well below 0.95 (V is the rod's 6 cm column).
+  EXPECT_GT(clean.precision, 0.95);
+  EXPECT_GT(clean.thin_recall, 0.30);
+  EXPECT_GT(degraded.precision, 0.95);
+  EXPECT_GT(degraded.thin_recall, 0.25);
+}
+
+}  // namespace
+}  // namespace lfrecon
