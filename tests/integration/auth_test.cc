@@ -21,16 +21,21 @@
 #include "eval/mesh_metrics.h"
 #include "io/dataset.h"
 #include "io/ply.h"
+#include "reference_dataset.h"
 
 namespace lfrecon::svc {
 namespace {
 namespace fs = std::filesystem;
 using lfrecon::testing::DaemonProcess;
+using lfrecon::testing::MakeReference;
+using lfrecon::testing::ReferenceDataset;
+using lfrecon::testing::RemoveReference;
 using lfrecon::testing::RunShell;
+using lfrecon::testing::ScoreAgainstReference;
 using std::chrono::milliseconds;
 
-const std::string kBin = std::string(LFRECON_BINARY_DIR) + "/bin/";
-constexpr double kVoxelMm = 8.0;
+const std::string kBin = lfrecon::testing::BinDir();
+constexpr double kVoxelMm = lfrecon::testing::kReferenceVoxelMm;
 
 // A TCP port on 127.0.0.1 that was free a moment ago.
 int FreePort() {
@@ -84,50 +89,18 @@ Keys MakeKeys(const fs::path& dir) {
 }
 
 // A synthetic dataset and `lfrecon run`'s fused mesh on it, shared by the tests.
-struct Reference {
-  fs::path dir, dataset;
-  TriangleMesh gt;
-  BoundingBox volume;
-  double f2 = 0, f4 = 0;
-  int views = 0;
-};
-Reference* g_ref = nullptr;
+ReferenceDataset* g_ref = nullptr;
 
-MeshMetrics Score(const TriangleMesh& mesh) {
-  MeshMetricsOptions mo;
-  mo.thresholds = {2 * kVoxelMm / 1000, 4 * kVoxelMm / 1000};
-  mo.sample_spacing = kVoxelMm / 2000;
-  mo.volume = g_ref->volume;
-  return EvaluateMesh(mesh, g_ref->gt, nullptr, mo);
-}
+MeshMetrics Score(const TriangleMesh& mesh) { return ScoreAgainstReference(mesh, *g_ref); }
 
 class AuthTest : public ::testing::Test {
  protected:
   static void SetUpTestSuite() {
-    g_ref = new Reference;
-    g_ref->dir = fs::temp_directory_path() / ("lfrecon_auth_ref_" + std::to_string(::getpid()));
-    fs::remove_all(g_ref->dir);
-    fs::create_directories(g_ref->dir);
-    g_ref->dataset = g_ref->dir / "dataset";
-    auto r = RunShell(kBin + "lfrecon -q synth --scene sphere --frames 90 --width 96 --height 54 --out " +
-                      g_ref->dataset.string());
-    ASSERT_EQ(r.code, 0) << r.output;
-    // The service uses the poses as submitted (no pose refinement yet): compare with run without it.
-    r = RunShell(kBin + "lfrecon -q run --dataset " + g_ref->dataset.string() + " --no-refine-poses --voxel-mm " +
-                 std::to_string(kVoxelMm) + " --out " + (g_ref->dir / "run").string());
-    ASSERT_EQ(r.code, 0) << r.output;
-    DatasetOptions d;
-    d.dataset_dir = g_ref->dataset;
-    const Dataset ds = Dataset::Open(d);
-    g_ref->views = ds.NumViews();
-    g_ref->volume = ds.bbox();
-    g_ref->gt = ReadPly(g_ref->dataset / "gt_mesh.ply");
-    const MeshMetrics m = Score(ReadPly(g_ref->dir / "run" / "mesh_raw.ply"));
-    g_ref->f2 = m.scores[0].fscore;
-    g_ref->f4 = m.scores[1].fscore;
+    g_ref = new ReferenceDataset;
+    MakeReference("auth_ref", /*with_run=*/true, g_ref);
   }
   static void TearDownTestSuite() {
-    fs::remove_all(g_ref->dir);
+    RemoveReference(*g_ref);
     delete g_ref;
   }
 

@@ -5,6 +5,7 @@
 #include <fcntl.h>
 #include <signal.h>
 #include <sys/prctl.h>
+#include <sys/resource.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -19,15 +20,24 @@
 
 namespace lfrecon::testing {
 
+// `args[0]` is the executable's path; stdout and stderr are appended to `log`.
+// `max_file_bytes` > 0: the process's RLIMIT_FSIZE (writes beyond it fail with
+// EFBIG; SIGXFSZ is ignored), e.g. a full disk without a mount.
 class DaemonProcess {
  public:
-  DaemonProcess(const std::vector<std::string>& args, const std::filesystem::path& log) : log_(log) {
+  DaemonProcess(const std::vector<std::string>& args, const std::filesystem::path& log, long max_file_bytes = 0)
+      : log_(log) {
     pid_ = ::fork();
     if (pid_ == 0) {
       ::prctl(PR_SET_PDEATHSIG, SIGKILL);
       const int fd = ::open(log.c_str(), O_WRONLY | O_CREAT | O_APPEND, 0644);
       ::dup2(fd, 1);
       ::dup2(fd, 2);
+      if (max_file_bytes > 0) {
+        ::signal(SIGXFSZ, SIG_IGN);
+        const rlimit limit{static_cast<rlim_t>(max_file_bytes), static_cast<rlim_t>(max_file_bytes)};
+        ::setrlimit(RLIMIT_FSIZE, &limit);
+      }
       std::vector<char*> argv;
       for (const auto& a : args) argv.push_back(const_cast<char*>(a.c_str()));
       argv.push_back(nullptr);
@@ -56,7 +66,8 @@ class DaemonProcess {
     Kill(SIGKILL);
     return -1;
   }
-  // Waits up to `timeout` for the process to exit by itself; its exit code, or -2 if it still runs.
+  // Waits up to `timeout` for the process to exit by itself; its exit code (-1
+  // if a signal ended it), or -2 if it still runs (it is not killed).
   int WaitExit(std::chrono::milliseconds timeout) {
     const auto end = std::chrono::steady_clock::now() + timeout;
     while (std::chrono::steady_clock::now() < end) {
@@ -72,6 +83,11 @@ class DaemonProcess {
     std::stringstream ss;
     ss << f.rdbuf();
     return ss.str();
+  }
+  // The last `n` characters of the log.
+  std::string LogTail(std::size_t n = 4000) const {
+    const std::string s = Log();
+    return s.size() > n ? s.substr(s.size() - n) : s;
   }
 
  private:

@@ -3,11 +3,8 @@
 // second aggregator on a store, a stored map lost in a crash, a full disk,
 // ingest killed mid-job. Real daemon processes over ipc:// sockets in a
 // temporary folder, on a small synthetic job.
-#include <fcntl.h>
 #include <signal.h>
 #include <sys/mount.h>
-#include <sys/prctl.h>
-#include <sys/resource.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -26,86 +23,23 @@
 #include "common/job_store.h"
 #include "common/messaging.h"
 #include "common/test_util.h"
+#include "daemon_process.h"
 #include "io/dataset.h"
+#include "reference_dataset.h"
 
 namespace lfrecon::svc {
 namespace {
 namespace fs = std::filesystem;
 using std::chrono::milliseconds;
 
-const std::string kBin = std::string(LFRECON_BINARY_DIR) + "/bin/";
+using lfrecon::testing::DaemonProcess;
+using lfrecon::testing::MakeReference;
+using lfrecon::testing::ReferenceDataset;
+using lfrecon::testing::RemoveReference;
 
-// A daemon; SIGKILLed and reaped on destruction, and killed by the kernel if
-// the test dies. `max_file_bytes` > 0: RLIMIT_FSIZE of the process (writes
-// beyond it fail with EFBIG; SIGXFSZ is ignored).
-class Process {
- public:
-  Process(const std::vector<std::string>& args, const fs::path& log, long max_file_bytes = 0) : log_(log) {
-    pid_ = ::fork();
-    if (pid_ == 0) {
-      ::prctl(PR_SET_PDEATHSIG, SIGKILL);
-      const int fd = ::open(log.c_str(), O_WRONLY | O_CREAT | O_APPEND, 0644);
-      ::dup2(fd, 1);
-      ::dup2(fd, 2);
-      if (max_file_bytes > 0) {
-        ::signal(SIGXFSZ, SIG_IGN);
-        const rlimit limit{static_cast<rlim_t>(max_file_bytes), static_cast<rlim_t>(max_file_bytes)};
-        ::setrlimit(RLIMIT_FSIZE, &limit);
-      }
-      std::vector<char*> argv;
-      for (const auto& a : args) argv.push_back(const_cast<char*>(a.c_str()));
-      argv.push_back(nullptr);
-      ::execv(argv[0], argv.data());
-      ::_exit(127);
-    }
-  }
-  ~Process() { Kill(SIGKILL); }
-  Process(const Process&) = delete;
-  void Kill(int sig) {
-    if (pid_ <= 0) return;
-    ::kill(pid_, sig);
-    int status;
-    ::waitpid(pid_, &status, 0);
-    pid_ = -1;
-  }
-  int Stop() {
-    if (pid_ <= 0) return exit_code_;
-    ::kill(pid_, SIGTERM);
-    return Wait(5.0);
-  }
-  // Waits up to `seconds` for the process to exit: its exit code, or -1 (then it is killed).
-  int Wait(double seconds) {
-    if (pid_ <= 0) return exit_code_;
-    for (int i = 0; i < seconds * 50; ++i) {
-      int status;
-      if (::waitpid(pid_, &status, WNOHANG) == pid_) {
-        pid_ = -1;
-        return exit_code_ = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-      }
-      std::this_thread::sleep_for(milliseconds(20));
-    }
-    Kill(SIGKILL);
-    return -1;
-  }
-  bool Running() const { return pid_ > 0 && ::waitpid(pid_, nullptr, WNOHANG) == 0; }
-  const fs::path& log() const { return log_; }
+const std::string kBin = lfrecon::testing::BinDir();
 
- private:
-  pid_t pid_ = -1;
-  int exit_code_ = -1;
-  fs::path log_;
-};
-
-std::string ReadAll(const fs::path& p) {
-  std::ifstream f(p);
-  std::stringstream ss;
-  ss << f.rdbuf();
-  return ss.str();
-}
-
-fs::path g_dataset;  // one synthetic dataset for every test
-fs::path g_dataset_root;
-int g_views = 0;
+ReferenceDataset g_ref;  // one synthetic dataset for every test (lfrecon run is not needed)
 
 // Files under `dir` whose name marks a temporary file of the store.
 int TempFiles(const fs::path& dir) {
@@ -118,19 +52,8 @@ int TempFiles(const fs::path& dir) {
 
 class FaultsTest : public ::testing::Test {
  protected:
-  static void SetUpTestSuite() {
-    g_dataset_root = fs::temp_directory_path() / ("lfrecon_faults_" + std::to_string(::getpid()));
-    fs::remove_all(g_dataset_root);
-    fs::create_directories(g_dataset_root);
-    g_dataset = g_dataset_root / "dataset";
-    const std::string cmd = kBin + "lfrecon -q synth --scene sphere --frames 90 --width 96 --height 54 --out " +
-                            g_dataset.string();
-    ASSERT_EQ(std::system(cmd.c_str()), 0) << cmd;
-    DatasetOptions d;
-    d.dataset_dir = g_dataset;
-    g_views = Dataset::Open(d).NumViews();
-  }
-  static void TearDownTestSuite() { fs::remove_all(g_dataset_root); }
+  static void SetUpTestSuite() { MakeReference("faults", /*with_run=*/false, &g_ref); }
+  static void TearDownTestSuite() { RemoveReference(g_ref); }
 
   void SetUp() override {
     tmp_ = std::make_unique<lfrecon::testing::TempDir>();
@@ -142,34 +65,31 @@ class FaultsTest : public ::testing::Test {
   }
   void TearDown() override {
     if (HasFailure())
-      for (const auto& p : procs_) {
-        const std::string log = ReadAll(p->log());
-        std::printf("---- %s ----\n%s\n", p->log().c_str(), log.substr(log.size() > 4000 ? log.size() - 4000 : 0).c_str());
-      }
+      for (const auto& p : procs_) std::printf("---- %s ----\n%s\n", p->log().c_str(), p->LogTail(4000).c_str());
     procs_.clear();
     client_.reset();
     if (mounted_) ::umount2(store_.c_str(), MNT_DETACH);
   }
 
-  Process* Start(const std::string& exe, std::vector<std::string> args, long max_file_bytes = 0) {
+  DaemonProcess* Start(const std::string& exe, std::vector<std::string> args, long max_file_bytes = 0) {
     args.insert(args.begin(), kBin + exe);
     const fs::path log = tmp_->path() / (exe + "_" + std::to_string(procs_.size()) + ".log");
-    procs_.push_back(std::make_unique<Process>(args, log, max_file_bytes));
+    procs_.push_back(std::make_unique<DaemonProcess>(args, log, max_file_bytes));
     return procs_.back().get();
   }
-  Process* StartAggregator(std::vector<std::string> extra = {}, long max_file_bytes = 0) {
+  DaemonProcess* StartAggregator(std::vector<std::string> extra = {}, long max_file_bytes = 0) {
     std::vector<std::string> a = {"--bind", agg_, "--store", store_.string()};
     a.insert(a.end(), extra.begin(), extra.end());
-    Process* p = Start("lfrecon-aggregate", a, max_file_bytes);
+    DaemonProcess* p = Start("lfrecon-aggregate", a, max_file_bytes);
     client_ = std::make_unique<RequestClient>(context_, agg_);
     return p;
   }
-  Process* StartIngest(std::vector<std::string> extra = {}) {
+  DaemonProcess* StartIngest(std::vector<std::string> extra = {}) {
     std::vector<std::string> a = {"--bind", ing_, "--aggregate", agg_, "--store", store_.string()};
     a.insert(a.end(), extra.begin(), extra.end());
     return Start("lfrecon-ingest", a);
   }
-  Process* StartWorker(const std::string& exe, std::vector<std::string> extra = {}) {
+  DaemonProcess* StartWorker(const std::string& exe, std::vector<std::string> extra = {}) {
     std::vector<std::string> a = {"--aggregate", agg_, "--store", store_.string()};
     a.insert(a.end(), extra.begin(), extra.end());
     return Start(exe, a);
@@ -186,7 +106,7 @@ class FaultsTest : public ::testing::Test {
     return r && r->has_pong();
   }
   std::string Submit(const std::string& extra = "") {
-    const std::string cmd = kBin + "lfrecon -q submit --ingest " + ing_ + " --dataset " + g_dataset.string() +
+    const std::string cmd = kBin + "lfrecon -q submit --ingest " + ing_ + " --dataset " + g_ref.dataset.string() +
                             " --voxel-mm 8" + extra;
     FILE* p = ::popen(cmd.c_str(), "r");
     std::string out;
@@ -235,7 +155,7 @@ class FaultsTest : public ::testing::Test {
   // A job written into the store as ingest would, frames spooled and announced: the test plays ingest.
   std::string CreateJobWithFrames(pb::JobSpec spec) {
     JobStore store(store_);
-    spec.set_dataset_dir(g_dataset.string());
+    spec.set_dataset_dir(g_ref.dataset.string());
     const Dataset ds = Dataset::Open(ToDatasetOptions(spec));
     const std::string job = store.CreateJob();
     store.WriteManifest(MakeManifest(job, spec, ds));
@@ -255,7 +175,7 @@ class FaultsTest : public ::testing::Test {
   fs::path store_;
   std::string agg_, ing_;
   std::unique_ptr<RequestClient> client_;
-  std::vector<std::unique_ptr<Process>> procs_;
+  std::vector<std::unique_ptr<DaemonProcess>> procs_;
   bool mounted_ = false;
 };
 
@@ -280,10 +200,10 @@ pb::Envelope Result(const std::string& job, pb::Stage stage, int view, const std
 // the files is echoed.
 TEST_F(FaultsTest, IngestReadsOnlyUnderItsDataRoots) {
   StartAggregator();
-  const fs::path root = g_dataset.parent_path();
+  const fs::path root = g_ref.dataset.parent_path();
   const fs::path elsewhere = tmp_->path() / "elsewhere";
   fs::create_directories(elsewhere);
-  Process* ing = StartIngest({"--data-root", elsewhere.string()});
+  DaemonProcess* ing = StartIngest({"--data-root", elsewhere.string()});
   auto submit = [&](const std::string& dataset) {
     const std::string cmd = kBin + "lfrecon -q submit --ingest " + ing_ + " --dataset " + dataset + " 2>&1";
     FILE* p = ::popen(cmd.c_str(), "r");
@@ -292,19 +212,19 @@ TEST_F(FaultsTest, IngestReadsOnlyUnderItsDataRoots) {
     while (std::fgets(buf, sizeof(buf), p)) out += buf;
     return std::make_pair(WEXITSTATUS(::pclose(p)), out);
   };
-  const auto outside = submit(g_dataset.string());
+  const auto outside = submit(g_ref.dataset.string());
   EXPECT_EQ(outside.first, 1) << outside.second;
   EXPECT_NE(outside.second.find("not under any --data-root"), std::string::npos) << outside.second;
   std::string up;
   for (int k = 0; k < 32; ++k) up += "../";  // climbs to / from the root, then down to the dataset
-  const auto dotdot = submit((elsewhere / up).string() + g_dataset.relative_path().string());
+  const auto dotdot = submit((elsewhere / up).string() + g_ref.dataset.relative_path().string());
   EXPECT_EQ(dotdot.first, 1) << dotdot.second;
   EXPECT_NE(dotdot.second.find("not under any --data-root"), std::string::npos) << dotdot.second;
   EXPECT_TRUE(ing->Running());
   // Under a root: accepted.
   ing->Kill(SIGKILL);
   StartIngest({"--data-root", elsewhere.string(), "--data-root", root.string()});
-  const auto inside = submit(g_dataset.string());
+  const auto inside = submit(g_ref.dataset.string());
   EXPECT_EQ(inside.first, 0) << inside.second;
 }
 
@@ -355,7 +275,7 @@ TEST_F(FaultsTest, WorkerErrorIsRetriedOnAnotherWorker) {
   const std::string job = Submit();
   const pb::JobStatus s = WaitEnded(job);
   EXPECT_EQ(s.state(), pb::STATE_DONE) << s.message();
-  EXPECT_EQ(s.views_fused(), static_cast<unsigned>(g_views));
+  EXPECT_EQ(s.views_fused(), static_cast<unsigned>(g_ref.views));
   EXPECT_GE(s.tasks_failed(), 3u);
   std::printf("job done with %u failed tasks retried elsewhere\n", s.tasks_failed());
 }
@@ -396,18 +316,18 @@ TEST_F(FaultsTest, ResultOverTheSizeLimitFailsTheJob) {
 
 // Two aggregators on one store served together, every view fused twice: the second refuses to start.
 TEST_F(FaultsTest, SecondAggregatorOnTheStoreRefusesToStart) {
-  Process* first = StartAggregator();
+  DaemonProcess* first = StartAggregator();
   ASSERT_TRUE(Ping(agg_));
   const std::string other = "ipc://" + (tmp_->path() / "agg2.sock").string();
-  Process* second = Start("lfrecon-aggregate", {"--bind", other, "--store", store_.string()});
-  EXPECT_EQ(second->Wait(10), 1);
-  EXPECT_NE(ReadAll(second->log()).find("another lfrecon-aggregate serves the job store"), std::string::npos)
-      << ReadAll(second->log());
+  DaemonProcess* second = Start("lfrecon-aggregate", {"--bind", other, "--store", store_.string()});
+  EXPECT_EQ(second->WaitExit(std::chrono::seconds(10)), 1);
+  EXPECT_NE(second->Log().find("another lfrecon-aggregate serves the job store"), std::string::npos)
+      << second->Log();
   EXPECT_TRUE(first->Running());
   EXPECT_TRUE(Ping(agg_));
   // The lock goes with the process, kill -9 included: a new aggregator starts.
   first->Kill(SIGKILL);
-  Process* third = Start("lfrecon-aggregate", {"--bind", other, "--store", store_.string()});
+  DaemonProcess* third = Start("lfrecon-aggregate", {"--bind", other, "--store", store_.string()});
   EXPECT_TRUE(Ping(other));
   EXPECT_TRUE(third->Running());
 }
@@ -416,7 +336,7 @@ TEST_F(FaultsTest, SecondAggregatorOnTheStoreRefusesToStart) {
 // loss leaves of an unsynced file): the job FAILED on restart. That view is
 // done again and the job completes.
 TEST_F(FaultsTest, EmptyStoredMapAfterCrashIsRedone) {
-  Process* agg = StartAggregator();
+  DaemonProcess* agg = StartAggregator();
   StartIngest();
   StartWorker("lfrecon-depth");
   StartWorker("lfrecon-propagate");
@@ -435,7 +355,7 @@ TEST_F(FaultsTest, EmptyStoredMapAfterCrashIsRedone) {
   StartAggregator();
   s = WaitEnded(job);
   EXPECT_EQ(s.state(), pb::STATE_DONE) << s.message();
-  EXPECT_EQ(s.views_fused(), static_cast<unsigned>(g_views));
+  EXPECT_EQ(s.views_fused(), static_cast<unsigned>(g_ref.views));
   EXPECT_GT(fs::file_size(map), 0u);  // done again
   EXPECT_EQ(TempFiles(store_), 0);
 }
@@ -450,8 +370,8 @@ TEST_F(FaultsTest, FullDiskFailsTheJobCleanly) {
   mounted_ = !std::getenv("LFRECON_TEST_NO_MOUNT") && ::mount("tmpfs", store_.c_str(), "tmpfs", 0, "size=6800k") == 0;
   const long max_file = mounted_ ? 0 : 20000;
   std::printf("full disk simulated by %s\n", mounted_ ? "a 6.7 MB tmpfs" : "RLIMIT_FSIZE 20000 on the aggregator");
-  Process* agg = StartAggregator({}, max_file);
-  Process* ing = StartIngest();
+  DaemonProcess* agg = StartAggregator({}, max_file);
+  DaemonProcess* ing = StartIngest();
   StartWorker("lfrecon-depth");
   StartWorker("lfrecon-propagate");
   const std::string job = Submit();
@@ -477,7 +397,7 @@ TEST_F(FaultsTest, FullDiskFailsTheJobCleanly) {
 // resumes (the frames already spooled are kept) and completes.
 TEST_F(FaultsTest, IngestKilledMidJobResumesOnRestart) {
   StartAggregator();
-  Process* ing = StartIngest({"--frame-delay-ms", "60"});
+  DaemonProcess* ing = StartIngest({"--frame-delay-ms", "60"});
   StartWorker("lfrecon-depth");
   StartWorker("lfrecon-propagate");
   const std::string job = Submit();
@@ -487,12 +407,12 @@ TEST_F(FaultsTest, IngestKilledMidJobResumesOnRestart) {
   const fs::path frame0 = JobStore(store_).FramePath(job, 0);
   const auto written = fs::last_write_time(frame0);
   const int before = static_cast<int>(Status(job).frames_spooled());
-  EXPECT_LT(before, g_views);
+  EXPECT_LT(before, g_ref.views);
   StartIngest();
   s = WaitEnded(job);
   EXPECT_EQ(s.state(), pb::STATE_DONE) << s.message();
-  EXPECT_EQ(s.frames_spooled(), static_cast<unsigned>(g_views));
-  EXPECT_EQ(s.views_fused(), static_cast<unsigned>(g_views));
+  EXPECT_EQ(s.frames_spooled(), static_cast<unsigned>(g_ref.views));
+  EXPECT_EQ(s.views_fused(), static_cast<unsigned>(g_ref.views));
   EXPECT_EQ(fs::last_write_time(frame0), written);  // kept, not spooled again
   EXPECT_EQ(TempFiles(store_), 0);
 }
@@ -500,7 +420,7 @@ TEST_F(FaultsTest, IngestKilledMidJobResumesOnRestart) {
 // Ingest killed and never restarted: the job fails with the reason instead of waiting for ever.
 TEST_F(FaultsTest, IngestGoneForGoodFailsTheJob) {
   StartAggregator({"--ingest-timeout-s", "2"});
-  Process* ing = StartIngest({"--frame-delay-ms", "100"});
+  DaemonProcess* ing = StartIngest({"--frame-delay-ms", "100"});
   const std::string job = Submit();
   pb::JobStatus s;
   ASSERT_TRUE(WaitFor(job, [](const pb::JobStatus& st) { return st.frames_spooled() >= 3; }, 30, &s));
@@ -518,7 +438,7 @@ TEST_F(FaultsTest, InvalidJobOptionsAreRefusedOrFailTheJob) {
   StartIngest();
   RequestClient ingest(context_, ing_);
   pb::Envelope sub = NewEnvelope();
-  sub.mutable_submit()->mutable_spec()->set_dataset_dir(g_dataset.string());
+  sub.mutable_submit()->mutable_spec()->set_dataset_dir(g_ref.dataset.string());
   sub.mutable_submit()->mutable_spec()->mutable_options()->set_sigma_s(2);
   auto r = ingest.Request(sub, milliseconds(10000));
   ASSERT_TRUE(r && r->has_error());
@@ -527,7 +447,7 @@ TEST_F(FaultsTest, InvalidJobOptionsAreRefusedOrFailTheJob) {
   // Written by an older ingest that did not check.
   JobStore store(store_);
   pb::JobSpec spec;
-  spec.set_dataset_dir(g_dataset.string());
+  spec.set_dataset_dir(g_ref.dataset.string());
   const Dataset ds = Dataset::Open(ToDatasetOptions(spec));
   spec.mutable_options()->set_sigma_s(2);
   const std::string job = store.CreateJob();
@@ -542,9 +462,9 @@ TEST_F(FaultsTest, InvalidJobOptionsAreRefusedOrFailTheJob) {
 // ERROR_INPUT for the quota) instead of piling up.
 TEST_F(FaultsTest, BoundsRefuseRequestsBeyondThem) {
   StartAggregator({"--fusion-delay-ms", "3000", "--max-queued-exports", "1"});
-  Process* ing = StartIngest({"--max-jobs", "2", "--max-ingest-threads", "1", "--frame-delay-ms", "40"});
+  DaemonProcess* ing = StartIngest({"--max-jobs", "2", "--max-ingest-threads", "1", "--frame-delay-ms", "40"});
   auto submit = [&](const std::string& endpoint) {
-    const std::string cmd = kBin + "lfrecon -q submit --ingest " + endpoint + " --dataset " + g_dataset.string() +
+    const std::string cmd = kBin + "lfrecon -q submit --ingest " + endpoint + " --dataset " + g_ref.dataset.string() +
                             " --voxel-mm 8 2>&1";
     FILE* p = ::popen(cmd.c_str(), "r");
     std::string out;

@@ -1,10 +1,7 @@
 // The streaming service end to end: separate daemon processes (ingest,
 // aggregate, N depth and N propagate workers) over ipc:// sockets on a small
 // synthetic job, compared with `lfrecon run` on the same data.
-#include <fcntl.h>
 #include <signal.h>
-#include <sys/prctl.h>
-#include <sys/wait.h>
 #include <unistd.h>
 
 #include <gtest/gtest.h>
@@ -21,75 +18,25 @@
 #include "common/job_store.h"
 #include "common/messaging.h"
 #include "common/test_util.h"
+#include "daemon_process.h"
 #include "eval/mesh_metrics.h"
 #include "io/dataset.h"
 #include "io/ply.h"
+#include "reference_dataset.h"
 
 namespace lfrecon::svc {
 namespace {
 namespace fs = std::filesystem;
 using std::chrono::milliseconds;
 
-const std::string kBin = std::string(LFRECON_BINARY_DIR) + "/bin/";
-constexpr double kVoxelMm = 8.0;
+using lfrecon::testing::DaemonProcess;
+using lfrecon::testing::MakeReference;
+using lfrecon::testing::ReferenceDataset;
+using lfrecon::testing::RemoveReference;
+using lfrecon::testing::ScoreAgainstReference;
 
-// A child process; killed (SIGKILL) and reaped on destruction, and killed by the
-// kernel if this test process dies (PR_SET_PDEATHSIG).
-class Process {
- public:
-  Process(const std::vector<std::string>& args, const fs::path& log) : log_(log) {
-    pid_ = ::fork();
-    if (pid_ == 0) {
-      ::prctl(PR_SET_PDEATHSIG, SIGKILL);
-      const int fd = ::open(log.c_str(), O_WRONLY | O_CREAT | O_APPEND, 0644);
-      ::dup2(fd, 1);
-      ::dup2(fd, 2);
-      std::vector<char*> argv;
-      for (const auto& a : args) argv.push_back(const_cast<char*>(a.c_str()));
-      argv.push_back(nullptr);
-      ::execv(argv[0], argv.data());
-      ::_exit(127);
-    }
-  }
-  ~Process() { Kill(SIGKILL); }
-  Process(const Process&) = delete;
-  void Kill(int sig) {
-    if (pid_ <= 0) return;
-    ::kill(pid_, sig);
-    int status;
-    ::waitpid(pid_, &status, 0);
-    pid_ = -1;
-  }
-  // Stops with SIGTERM; returns the exit status (or -1 if it had to be killed).
-  int Stop() {
-    if (pid_ <= 0) return -1;
-    ::kill(pid_, SIGTERM);
-    for (int i = 0; i < 100; ++i) {
-      int status;
-      if (::waitpid(pid_, &status, WNOHANG) == pid_) {
-        pid_ = -1;
-        return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-      }
-      std::this_thread::sleep_for(milliseconds(50));
-    }
-    Kill(SIGKILL);
-    return -1;
-  }
-  bool Running() const { return pid_ > 0 && ::waitpid(pid_, nullptr, WNOHANG) == 0; }
-  const fs::path& log() const { return log_; }
-
- private:
-  pid_t pid_ = -1;
-  fs::path log_;
-};
-
-std::string Tail(const fs::path& p, std::size_t n = 3000) {
-  std::ifstream f(p);
-  std::stringstream ss;
-  ss << f.rdbuf();
-  const std::string s = ss.str();
-  return s.size() > n ? s.substr(s.size() - n) : s;
-}
+const std::string kBin = lfrecon::testing::BinDir();
+constexpr double kVoxelMm = lfrecon::testing::kReferenceVoxelMm;
 
 // Runs a command, returns its stdout; fails the test on a non-zero exit.
 std::string RunCommand(const std::string& cmd) {
@@ -104,64 +51,23 @@ std::string RunCommand(const std::string& cmd) {
 }
 
 // One synthetic dataset and the embedded pipeline's result on it, for all tests.
-struct Reference {
-  fs::path dir, dataset;
-  TriangleMesh gt;
-  BoundingBox volume;
-  double f2 = 0, f4 = 0;  // F-score at 2 and 4 voxels of `lfrecon run`'s fused mesh (mesh_raw.ply)
-  std::size_t triangles = 0;
-  double refined_f2 = 0, refined_f4 = 0;  // of its refined mesh (mesh.ply: carving + screened Poisson)
-  std::size_t refined_triangles = 0;
-  int views = 0;
-};
-Reference* g_ref = nullptr;
+ReferenceDataset* g_ref = nullptr;
 
-MeshMetrics Score(const TriangleMesh& mesh) {
-  MeshMetricsOptions mo;
-  mo.thresholds = {2 * kVoxelMm / 1000, 4 * kVoxelMm / 1000};
-  mo.sample_spacing = kVoxelMm / 2000;
-  mo.volume = g_ref->volume;
-  return EvaluateMesh(mesh, g_ref->gt, nullptr, mo);
-}
+MeshMetrics Score(const TriangleMesh& mesh) { return ScoreAgainstReference(mesh, *g_ref); }
 
 class ServiceTest : public ::testing::Test {
  protected:
   static void SetUpTestSuite() {
-    g_ref = new Reference;
-    g_ref->dir = fs::temp_directory_path() / ("lfrecon_service_ref_" + std::to_string(::getpid()));
-    fs::remove_all(g_ref->dir);
-    fs::create_directories(g_ref->dir);
-    g_ref->dataset = g_ref->dir / "dataset";
-    RunCommand(kBin + "lfrecon -q synth --scene sphere --frames 90 --width 96 --height 54 --out " +
-               g_ref->dataset.string());
-    // The service uses the poses as submitted (no pose refinement yet): compare with run without it.
-    RunCommand(kBin + "lfrecon -q run --dataset " + g_ref->dataset.string() + " --no-refine-poses --voxel-mm " + std::to_string(kVoxelMm) +
-               " --out " + (g_ref->dir / "run").string());
-    DatasetOptions d;
-    d.dataset_dir = g_ref->dataset;
-    const Dataset ds = Dataset::Open(d);
-    g_ref->views = ds.NumViews();
-    g_ref->volume = ds.bbox();
-    g_ref->gt = ReadPly(g_ref->dataset / "gt_mesh.ply");
-    // The service's mesh (export) is the fused iso-surface, which `lfrecon run`
-    // writes as mesh_raw.ply; export --refine is its refined mesh.ply.
-    const TriangleMesh run = ReadPly(g_ref->dir / "run" / "mesh_raw.ply");
-    g_ref->triangles = run.triangles.size();
-    const MeshMetrics m = Score(run);
-    g_ref->f2 = m.scores[0].fscore;
-    g_ref->f4 = m.scores[1].fscore;
-    const TriangleMesh refined = ReadPly(g_ref->dir / "run" / "mesh.ply");
-    g_ref->refined_triangles = refined.triangles.size();
-    const MeshMetrics mr = Score(refined);
-    g_ref->refined_f2 = mr.scores[0].fscore;
-    g_ref->refined_f4 = mr.scores[1].fscore;
+    g_ref = new ReferenceDataset;
+    MakeReference("service_ref", /*with_run=*/true, g_ref);
+    if (!g_ref->has_run) return;
     std::printf("lfrecon run: mesh_raw %zu triangles, F@%.0fmm %.4f, F@%.0fmm %.4f; mesh (refined) %zu triangles, "
                 "%.4f, %.4f\n",
                 g_ref->triangles, 2 * kVoxelMm, g_ref->f2, 4 * kVoxelMm, g_ref->f4, g_ref->refined_triangles,
                 g_ref->refined_f2, g_ref->refined_f4);
   }
   static void TearDownTestSuite() {
-    fs::remove_all(g_ref->dir);
+    RemoveReference(*g_ref);
     delete g_ref;
   }
 
@@ -174,28 +80,28 @@ class ServiceTest : public ::testing::Test {
   }
   void TearDown() override {
     if (HasFailure())
-      for (const auto& p : procs_) std::printf("---- %s ----\n%s\n", p->log().c_str(), Tail(p->log()).c_str());
+      for (const auto& p : procs_) std::printf("---- %s ----\n%s\n", p->log().c_str(), p->LogTail(3000).c_str());
     procs_.clear();
     client_.reset();
   }
 
-  Process* Start(const std::string& exe, std::vector<std::string> args) {
+  DaemonProcess* Start(const std::string& exe, std::vector<std::string> args) {
     args.insert(args.begin(), kBin + exe);
     const fs::path log = tmp_->path() / (exe + "_" + std::to_string(procs_.size()) + ".log");
-    procs_.push_back(std::make_unique<Process>(args, log));
+    procs_.push_back(std::make_unique<DaemonProcess>(args, log));
     return procs_.back().get();
   }
-  Process* StartAggregator(std::vector<std::string> extra = {}) {
+  DaemonProcess* StartAggregator(std::vector<std::string> extra = {}) {
     std::vector<std::string> a = {"--bind", agg_, "--store", store_.string()};
     a.insert(a.end(), extra.begin(), extra.end());
     return Start("lfrecon-aggregate", a);
   }
-  Process* StartIngest(std::vector<std::string> extra = {}) {
+  DaemonProcess* StartIngest(std::vector<std::string> extra = {}) {
     std::vector<std::string> a = {"--bind", ing_, "--aggregate", agg_, "--store", store_.string()};
     a.insert(a.end(), extra.begin(), extra.end());
     return Start("lfrecon-ingest", a);
   }
-  Process* StartWorker(const std::string& exe, std::vector<std::string> extra = {}) {
+  DaemonProcess* StartWorker(const std::string& exe, std::vector<std::string> extra = {}) {
     std::vector<std::string> a = {"--aggregate", agg_, "--store", store_.string()};
     a.insert(a.end(), extra.begin(), extra.end());
     return Start(exe, a);
@@ -289,7 +195,7 @@ class ServiceTest : public ::testing::Test {
   fs::path store_;
   std::string agg_, ing_;
   std::unique_ptr<RequestClient> client_;
-  std::vector<std::unique_ptr<Process>> procs_;
+  std::vector<std::unique_ptr<DaemonProcess>> procs_;
 };
 
 TEST_F(ServiceTest, SubmittedJobOnSeparateProcessesEqualsEmbeddedRun) {
@@ -435,7 +341,7 @@ TEST_F(ServiceTest, CancelStopsAJob) {
 TEST_F(ServiceTest, KilledDepthWorkerViewsAreRedone) {
   StartAggregator({"--lease-ms", "1500"});
   StartIngest();
-  Process* doomed = StartWorker("lfrecon-depth", {"--stall-after-tasks", "3"});
+  DaemonProcess* doomed = StartWorker("lfrecon-depth", {"--stall-after-tasks", "3"});
   const std::string job = Submit();
   // The doomed worker holds its 4th view; kill it mid-task, then the others join.
   WaitUntil(job, [](const pb::JobStatus& s) { return s.sparse_done() >= 3; });
@@ -451,7 +357,7 @@ TEST_F(ServiceTest, KilledDepthWorkerViewsAreRedone) {
 }
 
 TEST_F(ServiceTest, AggregatorRestartResumesFromCheckpoint) {
-  Process* agg = StartAggregator();
+  DaemonProcess* agg = StartAggregator();
   StartIngest();
   StartWorker("lfrecon-depth");
   StartWorker("lfrecon-propagate");
@@ -502,7 +408,7 @@ std::pair<int, int> StoredAndLogged(const fs::path& store_dir, const std::string
 // SIGTERM stops the fusion thread after its view, the maps not fused yet stay
 // in the store, and a restarted aggregator fuses them: lfrecon run's mesh.
 TEST_F(ServiceTest, StatusAnsweredWhileFusingAndStopMidQueue) {
-  Process* agg = StartAggregator({"--fusion-delay-ms", "1500"});
+  DaemonProcess* agg = StartAggregator({"--fusion-delay-ms", "1500"});
   StartIngest();
   StartWorker("lfrecon-depth");
   StartWorker("lfrecon-propagate");
@@ -553,7 +459,7 @@ TEST_F(ServiceTest, StatusAnsweredWhileFusingAndStopMidQueue) {
 // Cancel while views wait for fusion: answered at once, the fusion thread
 // stops after the view it is integrating, nothing more is fused.
 TEST_F(ServiceTest, CancelWhileFusing) {
-  Process* agg = StartAggregator({"--fusion-delay-ms", "1500"});
+  DaemonProcess* agg = StartAggregator({"--fusion-delay-ms", "1500"});
   StartIngest();
   StartWorker("lfrecon-depth");
   StartWorker("lfrecon-propagate");
@@ -577,7 +483,7 @@ TEST_F(ServiceTest, CancelWhileFusing) {
   ex.mutable_export_request();
   EXPECT_EQ(Ask(ex).error().code(), pb::ERROR_BAD_REQUEST);
   EXPECT_EQ(agg->Stop(), 0);
-  EXPECT_NE(Tail(agg->log(), 100000).find("fusion thread stopped"), std::string::npos);
+  EXPECT_NE(agg->LogTail(100000).find("fusion thread stopped"), std::string::npos);
 }
 
 TEST_F(ServiceTest, BadMessagesGetErrorRepliesAndDaemonsKeepServing) {
