@@ -19,6 +19,8 @@ PACKAGES=(
   clang-14 libclang-rt-14-dev
   libceres-dev
   jq
+  # tests/cli/report_html_test loads report.html in headless Chromium (skips without it)
+  chromium
   colmap
 )
 

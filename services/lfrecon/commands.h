@@ -11,6 +11,8 @@ void AddSynthCommand(CLI::App& root, int* exit_code);
 void AddEvalCommand(CLI::App& root, int* exit_code);
 void AddDepthCommand(CLI::App& root, int* exit_code);
 void AddRunCommand(CLI::App& root, int* exit_code);
+// report: OUT/report.html from a run folder (report_html.cc)
+void AddReportCommand(CLI::App& root, int* exit_code);
 // poses: COLMAP-driven poses for a video or image folder (poses_command.cc)
 void AddPosesCommand(CLI::App& root, int* exit_code);
 // submit, status, export, cancel (service_commands.cc)

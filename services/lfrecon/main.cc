@@ -30,6 +30,7 @@ int main(int argc, char** argv) {
   lfrecon::cli::AddEvalCommand(app, &exit_code);
   lfrecon::cli::AddDepthCommand(app, &exit_code);
   lfrecon::cli::AddRunCommand(app, &exit_code);
+  lfrecon::cli::AddReportCommand(app, &exit_code);
   lfrecon::cli::AddPosesCommand(app, &exit_code);
   lfrecon::cli::AddServiceCommands(app, &exit_code);
   lfrecon::cli::AddKeygenCommand(app, &exit_code);

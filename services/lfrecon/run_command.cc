@@ -16,6 +16,7 @@
 #include "io/colmap_model.h"
 #include "pipeline/embedded_pipeline.h"
 #include "poses/pose_refinement.h"
+#include "run_outputs.h"
 #include "util/error.h"
 
 namespace lfrecon::cli {
@@ -35,6 +36,7 @@ struct RunArgs {
   int color_views = 8;
   double sigma_s = 0;
   bool no_refine_poses = false;
+  RunOutputFlags outputs;  // mesh formats, point cloud, COLMAP workspace, report.html
 };
 
 // OUT/sparse_refined/: the refined poses as a COLMAP text model (undistorted cameras).
@@ -59,12 +61,13 @@ void WriteRefinedModel(const Dataset& ds, const std::vector<PinholeView>& views,
 
 int RunPipeline(const RunArgs& args) {
   if (args.voxel_mm < 0) throw OptionError("--voxel-mm must be positive");
+  args.outputs.MeshFormats();  // checked before any work
   const Dataset ds = Dataset::Open(args.data.Resolve());
   PipelineOptions options;
   options.voxel_size = args.voxel_mm / 1000.0;
   options.views = ParseViewRange(args.views, ds.NumViews());
   options.out_dir = args.out;
-  options.write_depth = args.write_depth;
+  options.write_depth = args.write_depth || args.outputs.NeedsDepth();
   options.densify = !args.no_densify;
   options.refine = !args.no_refine;
   options.refine_options.use_poisson = args.poisson;
@@ -111,6 +114,11 @@ int RunPipeline(const RunArgs& args) {
     f << report.dump(2) << "\n";
     if (!f) throw InputError(report_path.string(), "cannot write");
   }
+  if (!args.out.empty()) {
+    std::vector<int> all(static_cast<std::size_t>(ds.NumViews()));
+    for (int i = 0; i < ds.NumViews(); ++i) all[static_cast<std::size_t>(i)] = i;  // those with depth maps
+    WriteRunOutputs(args.outputs, ds, views, all, r.mesh, r.stats.voxel_size, args.out);
+  }
   const PipelineStats& s = r.stats;
   std::cout << "wrote " << (args.out / "mesh.ply").string() << " (" << s.mesh_vertices << " vertices, "
             << s.mesh_triangles << " triangles) from " << s.views << " views at " << 1000 * s.voxel_size
@@ -126,6 +134,7 @@ void AddRunCommand(CLI::App& root, int* exit_code) {
   auto* cmd = root.add_subcommand(
       "run", "The whole reconstruction in one process: depth (§3), densification (§4), fusion (§5), mesh");
   args->data.AddTo(cmd);
+  args->outputs.AddTo(cmd);
   cmd->add_option("--out", args->out, "Output folder (mesh.ply, mesh_raw.ply, grid.vdb, report.json, mesh_turntable.png)")->required();
   cmd->add_option("--voxel-mm", args->voxel_mm, "Voxel edge in mm (default: the longest side of V / 256)");
   cmd->add_flag("--write-depth", args->write_depth, "Also write the fused per-view depth maps (depth/, confidence/ PFM)");

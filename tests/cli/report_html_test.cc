@@ -1,0 +1,138 @@
+// report.html (issue 17): written from a run folder by `lfrecon report`
+// (`lfrecon run` writes it too), loaded in headless Chromium, which must decode
+// every image on the page; and `lfrecon run`'s export flags.
+#include <gtest/gtest.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <array>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <regex>
+#include <sstream>
+#include <string>
+
+namespace {
+
+namespace fs = std::filesystem;
+
+struct Result {
+  int code = -1;
+  std::string output;  // stdout and stderr together
+};
+
+Result Shell(const std::string& cmd) {
+  Result r;
+  FILE* pipe = popen((cmd + " 2>&1").c_str(), "r");
+  if (!pipe) return r;
+  std::array<char, 4096> buf;
+  size_t n;
+  while ((n = fread(buf.data(), 1, buf.size(), pipe)) > 0) r.output.append(buf.data(), n);
+  const int status = pclose(pipe);
+  r.code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+  return r;
+}
+
+Result Cli(const std::string& args) { return Shell(std::string(LFRECON_CLI) + " " + args); }
+
+struct Dir {
+  fs::path path;
+  explicit Dir(const std::string& name)
+      : path(fs::temp_directory_path() / ("lfrecon_report_test_" + name + "_" + std::to_string(getpid()))) {
+    fs::remove_all(path);
+    fs::create_directories(path);
+  }
+  ~Dir() { fs::remove_all(path); }
+};
+
+std::string ReadFile(const fs::path& p) {
+  std::ifstream f(p, std::ios::binary);
+  std::stringstream ss;
+  ss << f.rdbuf();
+  return ss.str();
+}
+
+std::string Chromium() {
+  for (const char* c : {"/usr/bin/chromium", "/usr/bin/chromium-browser"})
+    if (fs::exists(c)) return c;
+  return "";
+}
+
+// A run folder with every part the page shows: report.json, the turntable,
+// a depth map and an edge preview (from `lfrecon depth --stage dense`), and
+// the ground truth as mesh.ply (so the evaluation is perfect).
+void MakeRunFolder(const fs::path& data, const fs::path& run) {
+  ASSERT_EQ(Cli("-q synth --scene sphere --frames 60 --width 96 --height 54 --out " + data.string()).code, 0);
+  const Result depth = Cli("-q depth --dataset " + data.string() + " --out " + run.string() +
+                           " --views 30:31 --stage dense");
+  ASSERT_EQ(depth.code, 0) << depth.output;
+  fs::copy_file(run / "preview" / "00030.png", run / "mesh_turntable.png");
+  fs::copy_file(data / "gt_mesh.ply", run / "mesh.ply");
+  std::ofstream(run / "report.json") << R"({
+    "counts": {"mesh_vertices": 14707, "mesh_triangles": 29410, "grid_bytes": 1048576},
+    "peak_rss_bytes": 314572800,
+    "seconds": {"depth_sparse": 12.5, "fusion": 7.25, "total": 25.0},
+    "views": {"processed": 60, "total": 60},
+    "volume": {"min": [-0.16, -0.16, 0.09], "max": [0.16, 0.16, 0.41]},
+    "voxel_size": 0.00125
+  })";
+}
+
+TEST(ReportHtml, ChromiumLoadsEveryImage) {
+  Dir tmp("chromium");
+  const fs::path data = tmp.path / "data", run = tmp.path / "run";
+  MakeRunFolder(data, run);
+  const Result r = Cli("-q report --run " + run.string() + " --gt " + (data / "gt_mesh.ply").string());
+  ASSERT_EQ(r.code, 0) << r.output;
+  const std::string html = ReadFile(run / "report.html");
+  // Self-contained: images are data URIs, no file links.
+  auto count = [&](const std::string& re) {
+    const std::regex r(re);
+    return std::distance(std::sregex_iterator(html.begin(), html.end(), r), std::sregex_iterator());
+  };
+  EXPECT_EQ(count("<img "), 3);  // turntable, depth, edges
+  EXPECT_EQ(count("<img src=\"data:image/png;base64,"), 3);
+  // Figures from report.json and the evaluation of the ground truth against itself.
+  EXPECT_NE(html.find("<td>depth_sparse</td><td>12.50</td><td>50.0 %</td>"), std::string::npos);
+  EXPECT_NE(html.find("Peak memory (RSS) 300 MiB"), std::string::npos);
+  EXPECT_NE(html.find("<td>5 mm</td><td>1.000</td><td>1.000</td><td>1.000</td>"), std::string::npos);
+  EXPECT_TRUE(fs::exists(run / "eval.json"));
+
+  const std::string chromium = Chromium();
+  if (chromium.empty()) GTEST_SKIP() << "chromium is not installed (deploy/install_deps.sh installs Debian's chromium)";
+  const Result dom = Shell("timeout 120 " + chromium +
+                           " --headless --no-sandbox --disable-gpu --no-first-run --disable-background-networking"
+                           " --user-data-dir=" + (tmp.path / "profile").string() +
+                           " --virtual-time-budget=5000 --dump-dom file://" + (run / "report.html").string() +
+                           " 2>/dev/null");
+  ASSERT_EQ(dom.code, 0) << dom.output.substr(0, 2000);
+  // The page's script writes each image's decoded width and how many decoded.
+  std::smatch m;
+  ASSERT_TRUE(std::regex_search(dom.output, m, std::regex("data-images-loaded=\"(\\d+)\""))) << dom.output.substr(0, 2000);
+  EXPECT_EQ(m[1], "3");
+  std::vector<std::string> widths;
+  const std::regex w("alt=\"([^\"]*)\"[^>]*data-natural-width=\"(\\d+)\"");
+  for (auto it = std::sregex_iterator(dom.output.begin(), dom.output.end(), w); it != std::sregex_iterator(); ++it)
+    widths.push_back((*it)[1].str() + "=" + (*it)[2].str());
+  // The turntable stand-in is the depth command's preview (frame | map side by side: 192 px),
+  // the depth map itself 96 px, the edge preview 96 px.
+  EXPECT_EQ(widths, (std::vector<std::string>{"turntable render of mesh.ply=192", "depth 00030=96", "edges 00030=96"}));
+}
+
+TEST(ReportHtml, MissingReportJsonNamesIt) {
+  Dir tmp("missing");
+  const Result r = Cli("report --run " + tmp.path.string());
+  EXPECT_EQ(r.code, 1);
+  EXPECT_NE(r.output.find("report.json"), std::string::npos) << r.output;
+}
+
+TEST(RunExports, UnknownMeshFormatIsAUsageError) {
+  Dir tmp("format");
+  const Result r = Cli("run --dataset " + tmp.path.string() + " --out " + (tmp.path / "o").string() +
+                       " --mesh-format ply,stl");
+  EXPECT_EQ(r.code, 2) << r.output;
+  EXPECT_NE(r.output.find("--mesh-format"), std::string::npos) << r.output;
+}
+
+}  // namespace
