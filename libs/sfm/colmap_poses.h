@@ -28,10 +28,10 @@ struct ColmapPosesOptions {
   std::string colmap = "colmap";     // the COLMAP binary (looked up in PATH without a '/')
   std::string camera_model = "SIMPLE_RADIAL";  // one camera for all frames: SIMPLE_RADIAL or PINHOLE
   int threads = 0;                   // COLMAP's threads (0: all cores)
-  int max_num_features = 8192;       // SIFT features per frame
-  int overlap = 5;                   // keyframe k is matched with keyframes k+1 .. k+overlap
-  int loop_pairs = 5;                // the first and last loop_pairs keyframes are matched too (closes loops; 0: off)
-  int register_neighbours = 2;       // other frames: matched with this many keyframes before and after
+  int max_num_features = 2048;       // SIFT features per frame (CPU matching cost grows with its square)
+  int overlap = 3;                   // keyframe k is matched with keyframes k+1 .. k+overlap
+  int loop_pairs = 3;                // the first and last loop_pairs keyframes are matched too (closes loops; 0: off)
+  int register_neighbours = 1;       // other frames: matched with this many keyframes before and after
   bool bundle_adjust_all = false;    // a final bundle adjustment over every frame (slower)
   std::string image_format = "png";  // frames extracted from a video: png or jpg (quality 95)
   WorldFrameOptions world;

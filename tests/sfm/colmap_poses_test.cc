@@ -209,15 +209,18 @@ TEST(WorldFrame, ReadsPoints3DText) {
 
 // Issue 17: a generated loop rendered to a video file and posed by COLMAP:
 // after a similarity alignment to the true cameras, median rotation error
-// <= 0.1 deg and centre error <= 0.2 % of the camera distance.
+// <= 0.1 deg and centre error <= 0.2 % of the camera distance. 480x270: at
+// 320x180 the same loop gave 0.07-0.12 deg over runs (COLMAP's threads make
+// runs differ; the error is a smooth deformation of the ring, not noise), at
+// 480x270 0.053-0.058 deg (48 and 60 frames).
 TEST(ColmapPoses, GeneratedLoopVideo) {
   if (FindExecutable("colmap").empty()) GTEST_SKIP() << "colmap is not installed (apt-get install colmap): skipped";
   TempDir dir;
   synth::SynthOptions so;
   so.scene = "tabletop";
-  so.frames = 60;
-  so.width = 320;
-  so.height = 180;
+  so.frames = 48;
+  so.width = 480;
+  so.height = 270;
   so.render.quantize = true;
   const synth::SynthSequence seq = synth::SynthSequence::Create(so);
   std::string codec;
@@ -240,8 +243,8 @@ TEST(ColmapPoses, GeneratedLoopVideo) {
   std::printf("poses: %d/%d frames, %d/%d keyframes in %.1f s\n", s.registered, s.frames, s.keyframes_registered,
               s.keyframes, s.seconds);
   for (const auto& [name, sec] : s.step_seconds) std::printf("  %s: %.1f s\n", name.c_str(), sec);
-  EXPECT_EQ(s.frames, 60);
-  EXPECT_EQ(s.registered, 60);
+  EXPECT_EQ(s.frames, 48);
+  EXPECT_EQ(s.registered, 48);
 
   // The written dataset opens as lfrecon run opens it, V from its scene.json.
   DatasetOptions dopt;
