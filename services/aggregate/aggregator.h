@@ -30,7 +30,12 @@
 //    carving and colour frames are read from the store for that export only.
 //    A finished job's refined mesh is kept as mesh_refined.ply and served
 //    from there afterwards.
-// No algorithm here: the stages are the libraries' calls.
+//  * What is computed, from which frames and maps, and when a job is done
+//    follow the job's ReconstructionPlan (JobGeometry::plan), the plan
+//    `lfrecon run` computes for the same cameras and options.
+// No algorithm here: the stages are the libraries' calls. One job per file:
+// aggregator.cc (dispatch), leases.cc (view tasks), job_fusion.cc (a job's
+// fusion and checkpoint), export.cc (exports); aggregator_job.h (a job's state).
 #include <chrono>
 #include <functional>
 #include <map>
@@ -41,7 +46,6 @@
 #include "common/job_store.h"
 #include "common/messaging.h"
 #include "fusion/probabilistic_fusion.h"
-#include "geometry/view_graph.h"
 
 namespace lfrecon::svc {
 

@@ -359,24 +359,20 @@ DepthMap DepthMapFromProto(const pb::DepthMap& m, int width, int height, const s
   return d;
 }
 
-PipelineOptions JobPipelineOptions(const pb::JobOptions& o) {
-  PipelineOptions options;
-  options.voxel_size = o.voxel_size();
-  options.densify = !o.no_densify();
-  if (o.has_color_views()) options.color_views = o.color_views();
-  if (!(o.sigma_s() >= 0) || !std::isfinite(o.sigma_s())) throw OptionError("sigma_s must be positive");
-  if (o.sigma_s() > 0) (options.densify ? options.dense_sigma_s : options.fusion.sigma_s) = o.sigma_s();
-  options.Check();
-  return options;
+ReconstructionFlags JobFlags(const pb::JobOptions& o) {
+  ReconstructionFlags f;
+  f.voxel_size = o.voxel_size();
+  f.sigma_s = o.sigma_s();
+  f.no_densify = o.no_densify();
+  if (o.has_color_views()) f.color_views = o.color_views();
+  f.all_views = o.all_views();
+  return f;
 }
 
+PipelineOptions JobPipelineOptions(const pb::JobOptions& o) { return OptionsFromFlags(JobFlags(o)); }
+
 FusionOptions JobFusionOptions(const PipelineOptions& po, const BoundingBox& volume) {
-  FusionOptions fo = po.fusion;
-  fo.volume = volume;
-  fo.voxel_size = PipelineVoxelSize(volume, po);
-  if (po.densify) fo.sigma_s = po.dense_sigma_s;
-  fo.Check();
-  return fo;
+  return PipelineFusionOptions(po, volume);
 }
 
 pb::JobManifest MakeManifest(const std::string& id, const pb::JobSpec& spec, const Dataset& ds) {
@@ -422,7 +418,8 @@ JobGeometry LoadJobGeometry(const JobStore& store, const std::string& id) {
   if (g.views.empty()) throw InputError(what, "views", "no views");
   g.volume = BoxFromProto(m.volume(), what);
   g.options = JobPipelineOptions(m.spec().options());
-  JobFusionOptions(g.options, g.volume);  // validated with V, as the aggregator sets up the grid
+  // Validated with V (the fusion grid), as `lfrecon run` plans its run.
+  g.plan = ReconstructionPlan::Compute(g.views, g.volume, g.options);
   return g;
 }
 

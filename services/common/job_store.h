@@ -24,6 +24,8 @@
 #include "io/dataset.h"
 #include "lfrecon_service.pb.h"
 #include "pipeline/embedded_pipeline.h"
+#include "pipeline/pipeline_flags.h"
+#include "pipeline/reconstruction_plan.h"
 
 namespace lfrecon::svc {
 
@@ -102,10 +104,11 @@ cv::Mat FrameFromProto(const pb::Frame& frame, int width, int height, const std:
 pb::DepthMap DepthMapToProto(const DepthMap& map, int view, pb::MapKind kind);
 DepthMap DepthMapFromProto(const pb::DepthMap& map, int width, int height, const std::string& what);
 
-// The embedded pipeline's options for a job: PipelineOptions defaults with the
-// job's overrides, exactly as `lfrecon run` maps its flags.
+// A job's options are `lfrecon run`'s flags (pipeline/pipeline_flags.h); the
+// pipeline options follow from them by the same mapping as run's (OptionsFromFlags).
 // Every job option is validated here (PipelineOptions::Check, throws OptionError):
 // ingest refuses a job whose options would fail later.
+ReconstructionFlags JobFlags(const pb::JobOptions& options);
 PipelineOptions JobPipelineOptions(const pb::JobOptions& options);
 // The job's fusion grid options for V, as the embedded pipeline sets them up; throws OptionError.
 FusionOptions JobFusionOptions(const PipelineOptions& options, const BoundingBox& volume);
@@ -122,6 +125,10 @@ struct JobGeometry {
   std::vector<std::string> names;
   BoundingBox volume;
   PipelineOptions options;
+  // The job's plan (views selected, neighbours, on_grid, voters, colour and
+  // carving frames, fusion options), as `lfrecon run` computes it for the same
+  // cameras and options.
+  ReconstructionPlan plan;
 };
 JobGeometry LoadJobGeometry(const JobStore& store, const std::string& id);
 

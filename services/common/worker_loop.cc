@@ -31,6 +31,9 @@ StoreCache::Entry& StoreCache::Get(const std::string& job, int kind, int index) 
     Entry e;
     if (kind == 0) {
       e.frame.view = g.views[index];
+      // The job plan's hierarchy-grid flag (as StreamingDepth sets it in lfrecon run):
+      // a depth task's later levels use grid frames only.
+      e.frame.on_grid = g.plan.OnGrid(index);
       e.frame.image = store_.ReadFrame(job, index, g.views[index]);
       PrepareViewImage(&e.frame, g.options.depth.gradient);
       ++frames_read_;

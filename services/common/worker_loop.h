@@ -35,7 +35,8 @@ class StoreCache {
  public:
   StoreCache(const JobStore& store, int capacity) : store_(store), capacity_(capacity) {}
   const JobGeometry& Geometry(const std::string& job);
-  // The frame of view `index` with PrepareViewImage applied (as the depth stage holds it).
+  // The frame of view `index` with PrepareViewImage applied and its on_grid flag
+  // from the job's plan (as the depth stage of `lfrecon run` holds it).
   const ViewImage& Frame(const std::string& job, int index);
   const DepthMap& SparseMap(const std::string& job, int index);
   // Drops least recently used entries beyond the capacity, never those used since BeginTask().

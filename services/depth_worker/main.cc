@@ -1,7 +1,9 @@
 // lfrecon-depth: a depth worker. Each task is one view: its frame and the
-// frames within 5° (read from the job store), and the sparse depth from
-// gradients (§3.1, GradientDepthEstimator) with the job's options. Run N of
-// them; the aggregator hands out the views.
+// frames its hierarchy uses (the job plan's depth neighbours among the views
+// within 5°, in the estimator's order, read from the job store with the plan's
+// on_grid flags), and the sparse depth from gradients (§3.1,
+// GradientDepthEstimator) with the job's options. Run N of them; the
+// aggregator hands out the views.
 #include <iostream>
 
 #include "common/worker_loop.h"

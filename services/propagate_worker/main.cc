@@ -9,7 +9,7 @@
 #include <set>
 
 #include "common/worker_loop.h"
-#include "depth/depth_filter.h"
+#include "depth/sliding_vote_grid.h"
 #include "propagation/depth_propagator.h"
 #include "util/memory.h"
 
@@ -35,33 +35,21 @@ int main(int argc, char** argv) {
       DepthMap base = sparse;
       if (po.depth.run_filter) {
         // The vote grid of the views within 15° (§3.2), kept between tasks and
-        // updated by adding/removing voters, as StreamingDepth slides it: a
+        // slid by adding/removing voters, as StreamingDepth slides it: a
         // worker that gets consecutive views splats ~2 maps per task, not all.
         static std::string grid_job;
-        static std::unique_ptr<VoteGrid> grid;
-        static std::set<int> in_grid;
+        static std::unique_ptr<SlidingVoteGrid> grid;
         if (grid_job != job || !grid) {
-          grid = std::make_unique<VoteGrid>(g.volume, po.depth.filter);
-          in_grid.clear();
+          grid = std::make_unique<SlidingVoteGrid>(g.volume, po.depth.filter);
           grid_job = job;
         }
         std::set<int> voters(task.voters().begin(), task.voters().end());
         voters.insert(v);
         for (int j : voters)
           if (j < 0 || j >= static_cast<int>(g.views.size())) throw std::invalid_argument("voter out of range");
-        for (auto it = in_grid.begin(); it != in_grid.end();) {
-          if (!voters.count(*it)) {
-            grid->Splat(cache.SparseMap(job, *it), g.views[*it], -1.0f);
-            it = in_grid.erase(it);
-          } else {
-            ++it;
-          }
-        }
-        for (int j : voters)
-          if (!in_grid.count(j)) {
-            grid->Splat(cache.SparseMap(job, j), g.views[j], 1.0f);
-            in_grid.insert(j);
-          }
+        grid->MoveTo(
+            voters, [&](int j) { return cache.SparseMap(job, j); },
+            [&](int j) -> const PinholeView& { return g.views[j]; });
         base = grid->Filter(sparse, g.views[v]);
       }
       if (!po.densify) return DepthMapToProto(base, v, pb::MAP_FILTERED);

@@ -1,0 +1,85 @@
+#pragma once
+// Inside lfrecon-aggregate (not a public header): a job's state, shared by the
+// files of the daemon, each with one job:
+//   aggregator.cc  dispatch: requests to their handlers, the serving loop, the exports' lanes
+//   leases.cc      view tasks: what is ready (the job plan's), leases, results, failures
+//   job_fusion.cc  a job's fusion and checkpoint: loading (and replaying) it, the fusion thread, its end
+//   export.cc      meshes on request: plain (of the live grid) and refined (from the checkpoint)
+#include <atomic>
+#include <condition_variable>
+#include <deque>
+#include <map>
+#include <memory>
+#include <mutex>
+#include <set>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "aggregator.h"
+#include "fusion/probabilistic_fusion.h"
+
+namespace lfrecon::svc {
+
+struct Aggregator::Job {
+  std::string id;
+  pb::JobState state = pb::STATE_INGESTING;
+  std::string message;
+  Clock::time_point created = Clock::now();
+  pb::JobStatus final_status;  // for jobs that ended (loaded from status.pb)
+  // Running jobs only. The serving thread's:
+  bool active = false;  // running: the fusion thread is up, results are taken
+  JobGeometry geo;      // constant once loaded (the fusion thread reads it too)
+  int n = 0;         // frames (views) of the job
+  int num_fused = 0;  // views to fuse: the plan's selected views (geo.plan.views)
+  std::vector<char> frame_ok, sparse_ok, dense_ok;
+  int frames_spooled = 0, sparse_done = 0, dense_done = 0;  // dense_done: maps received (stored)
+  bool ingest_done = false;
+  std::map<std::pair<int, int>, std::pair<Clock::time_point, std::string>> leases;  // (stage, view) -> deadline, worker
+  int leases_expired = 0;
+  std::map<std::pair<int, int>, std::set<std::string>> leased_to;  // (stage, view) -> every worker given it
+  struct Tries {
+    int failures = 0;
+    std::set<std::string> failed_on;  // workers it failed on
+  };
+  std::map<std::pair<int, int>, Tries> tries;
+  int tasks_failed = 0;
+  Clock::time_point last_ingest = Clock::now();  // JobCreated, FrameSpooled, IngestDone (or the load)
+  // Shared with the job's fusion thread:
+  std::mutex grid_mu;  // held while a view is integrated and while an export extracts its mesh
+  std::unique_ptr<ProbabilisticFusion> fusion;  // guarded by grid_mu; released when the thread stops
+  std::mutex queue_mu;                          // guards queue, fused (and stop's changes, for the wait)
+  std::condition_variable queue_cv;
+  std::deque<std::pair<int, bool>> queue;  // (view, append to fused.log): stored dense maps to fuse, in order
+  std::atomic<bool> stop{false};
+  std::vector<char> fused;
+  std::vector<int> unreadable;  // stored dense maps the fusion thread could not read: done again
+  std::atomic<int> views_fused{0};  // changes under grid_mu (with the grid)
+  std::atomic<std::uint64_t> active_voxels{0};
+  enum Outcome { kFusing = 0, kFinished = 1, kFailed = 2 };
+  std::atomic<int> outcome{kFusing};  // kFinished: every view fused, outputs written
+  std::string fusion_error;           // kFailed: why (written before outcome)
+  std::uint32_t triangles = 0;        // kFinished: of mesh.ply (written before outcome)
+  double seconds_outputs = 0;
+  int replay = 0;  // views queued from the checkpoint when loaded
+  std::thread thread;
+
+  ~Job() { StopFusion(*this, true); }
+  bool Ended() const {
+    return state == pb::STATE_DONE || state == pb::STATE_FAILED || state == pb::STATE_CANCELLED;
+  }
+  bool FramesOk(int v, const std::vector<int>& nbs) const {
+    if (!frame_ok[v]) return false;
+    for (int j : nbs)
+      if (!frame_ok[j]) return false;
+    return true;
+  }
+};
+
+// The job's fusion grid, empty: V, voxel and σ_s as the plan sets them (as the embedded pipeline's).
+std::unique_ptr<ProbabilisticFusion> NewFusion(const JobGeometry& geo);
+// The fused mesh with colour from the plan's colour frames (as the embedded
+// pipeline's), those of `frame_ok` read from the store.
+void ColourMesh(const JobStore& store, const JobGeometry& geo, const std::vector<char>& frame_ok, TriangleMesh* mesh);
+
+}  // namespace lfrecon::svc

@@ -1,0 +1,297 @@
+// lfrecon-aggregate, a job's fusion and checkpoint: loading a job from the
+// store (what a crash left, replaying fused.log), its fusion thread (dense
+// maps into the grid in arrival order, the outputs when the last view is
+// fused), its end and status.
+#include "aggregator_job.h"
+
+#include <spdlog/spdlog.h>
+
+#include <sstream>
+
+#include "io/ply.h"
+#include "util/error.h"
+#include "util/progress.h"
+
+namespace lfrecon::svc {
+namespace fs = std::filesystem;
+
+// The job's fusion grid, empty: V, voxel and σ_s as the plan sets them (as the embedded pipeline's).
+std::unique_ptr<ProbabilisticFusion> NewFusion(const JobGeometry& geo) {
+  return std::make_unique<ProbabilisticFusion>(geo.plan.fusion);
+}
+
+std::unique_ptr<Aggregator::Job> Aggregator::LoadOrFail(const std::string& id) {
+  try {
+    return LoadJob(id);
+  } catch (const std::exception& e) {
+    auto job = std::make_unique<Job>();
+    job->id = id;
+    EndJob(*job, pb::STATE_FAILED, std::string("cannot load the job: ") + e.what());
+    return job;
+  }
+}
+
+std::unique_ptr<Aggregator::Job> Aggregator::LoadJob(const std::string& id) {
+  auto job = std::make_unique<Job>();
+  job->id = id;
+  if (auto st = store_.ReadText(id, "status.pb")) {
+    if (!job->final_status.ParseFromString(*st)) throw InputError((store_.JobDir(id) / "status.pb").string(), "corrupt");
+    job->state = job->final_status.state();
+    job->message = job->final_status.message();
+    return job;
+  }
+  job->geo = LoadJobGeometry(store_, id);
+  const int n = job->n = static_cast<int>(job->geo.views.size());
+  job->num_fused = static_cast<int>(job->geo.plan.views.size());
+  job->frame_ok.assign(n, 0);
+  job->sparse_ok.assign(n, 0);
+  job->dense_ok.assign(n, 0);
+  job->fused.assign(n, 0);
+  // What a crash (or a power loss before the store synced its files) left: a
+  // stored file too short to hold its view is removed and that view done again.
+  const fs::path dir = store_.JobDir(id);
+  for (const char* sub : {"sparse", "dense"}) {  // this daemon's temporary files (it holds the store's lock)
+    std::error_code ec;
+    for (const auto& e : fs::directory_iterator(dir / sub, ec))
+      if (e.path().filename().string().find(".tmp") != std::string::npos) fs::remove(e.path(), ec);
+  }
+  auto intact = [&](const fs::path& p, std::uintmax_t min_bytes) {
+    std::error_code ec;
+    const std::uintmax_t size = fs::file_size(p, ec);
+    if (ec) return false;
+    if (size >= min_bytes) return true;
+    spdlog::warn("aggregate: job {}: {} holds {} bytes, at least {} expected: removed", id, p.string(), size, min_bytes);
+    fs::remove(p, ec);
+    return false;
+  };
+  int bad_frame = -1;
+  for (int k = 0; k < n; ++k) {
+    const std::uintmax_t pixels = static_cast<std::uintmax_t>(job->geo.views[k].width) * job->geo.views[k].height;
+    if (store_.HasFrame(id, k)) {
+      if (intact(store_.FramePath(id, k), pixels * 12)) job->frame_ok[k] = 1, ++job->frames_spooled;
+      else if (bad_frame < 0) bad_frame = k;
+    }
+    if (store_.HasMap(id, pb::MAP_SPARSE, k) && intact(store_.MapPath(id, pb::MAP_SPARSE, k), pixels * 4))
+      job->sparse_ok[k] = 1, ++job->sparse_done;
+    if (store_.HasMap(id, pb::MAP_DENSE, k)) intact(store_.MapPath(id, pb::MAP_DENSE, k), pixels * 4);
+  }
+  job->ingest_done = store_.ReadText(id, "ingest.done").has_value();
+  if (job->ingest_done) job->state = pb::STATE_RUNNING;
+  job->fusion = NewFusion(job->geo);
+  job->active = true;
+  // Checkpoint: the fusion thread replays the fused views in their order,
+  // then fuses (and logs) any dense map that was stored but not yet logged.
+  if (auto log = store_.ReadText(id, "fused.log")) {
+    std::istringstream ss(*log);
+    int v;
+    while (ss >> v)
+      if (v >= 0 && v < n && !job->dense_ok[v] && store_.HasMap(id, pb::MAP_DENSE, v)) {
+        Enqueue(*job, v, false);
+        ++job->replay;
+      }
+  }
+  int unlogged = 0;
+  for (int v = 0; v < n; ++v)
+    if (!job->dense_ok[v] && store_.HasMap(id, pb::MAP_DENSE, v)) Enqueue(*job, v, true), ++unlogged;
+  spdlog::info("aggregate: job {} loaded: {} views, {} frames, {} sparse, {} dense maps to fuse ({} from fused.log, "
+               "{} stored after it)",
+               id, n, job->frames_spooled, job->sparse_done, job->dense_done, job->replay, unlogged);
+  if (store_.ReadText(id, "cancelled")) {  // cancelled, then stopped before status.pb was written
+    EndJob(*job, pb::STATE_CANCELLED, "cancelled by the user");
+    job->fusion.reset();
+    return job;
+  }
+  if (bad_frame >= 0 && job->ingest_done) {  // ingest will not send it again
+    EndJob(*job, pb::STATE_FAILED, "frame " + std::to_string(bad_frame) + " in the job store is corrupt");
+    job->fusion.reset();
+    return job;
+  }
+  job->thread = std::thread(&Aggregator::FusionLoop, this, job.get());
+  return job;
+}
+
+// Serving thread: the dense map of `view` is in the store; it is fused after those queued before it.
+void Aggregator::Enqueue(Job& job, int view, bool log) const {
+  if (!job.dense_ok[view]) job.dense_ok[view] = 1, ++job.dense_done;
+  {
+    std::lock_guard<std::mutex> lk(job.queue_mu);
+    job.queue.emplace_back(view, log);
+  }
+  job.queue_cv.notify_one();
+}
+
+void Aggregator::StopFusion(Job& job, bool join) {
+  {
+    std::lock_guard<std::mutex> lk(job.queue_mu);
+    job.stop = true;
+  }
+  job.queue_cv.notify_all();
+  if (join && job.thread.joinable()) job.thread.join();
+}
+
+void Aggregator::FusionLoop(Job* jp) const {
+  Job& job = *jp;
+  const std::string& id = job.id;
+  const PipelineOptions& po = job.geo.options;
+  Timer replay_timer;
+  int done = 0;
+  try {
+    for (;;) {
+      std::pair<int, bool> item;
+      {
+        std::unique_lock<std::mutex> lk(job.queue_mu);
+        // A signal cannot notify: look at StopRequested() now and then.
+        while (!job.stop && !StopRequested() && (job.queue.empty() || job.outcome != Job::kFusing))
+          job.queue_cv.wait_for(lk, std::chrono::milliseconds(200));
+        if (job.stop || StopRequested()) break;
+        item = job.queue.front();
+        job.queue.pop_front();
+        if (job.fused[item.first]) continue;
+      }
+      const int v = item.first;
+      DepthMap map;
+      try {
+        map = store_.ReadMap(id, pb::MAP_DENSE, v, job.geo.views[v]);
+      } catch (const InputError& e) {  // a map the store lost (a crash): the view is done again
+        spdlog::warn("aggregate: job {}: stored dense map of view {} unreadable ({}): removed, re-issued", id, v,
+                     e.what());
+        std::error_code ec;
+        fs::remove(store_.MapPath(id, pb::MAP_DENSE, v), ec);
+        std::lock_guard<std::mutex> lk(job.queue_mu);
+        job.unreadable.push_back(v);
+        continue;
+      }
+      {
+        std::lock_guard<std::mutex> grid(job.grid_mu);
+        job.fusion->Integrate(job.geo.views[v], map, v);
+        for (int slept = 0; slept < options_.fusion_delay_ms && !job.stop && !StopRequested(); slept += 10)
+          std::this_thread::sleep_for(std::chrono::milliseconds(10));  // fault injection (tests)
+        job.active_voxels = job.fusion->Stats().active_voxels;
+        if (item.second) store_.AppendLine(id, "fused.log", std::to_string(v));  // before anyone sees it fused
+        {
+          std::lock_guard<std::mutex> lk(job.queue_mu);
+          job.fused[v] = 1;
+        }
+        ++job.views_fused;
+      }
+      if (++done == job.replay && job.replay > 0)
+        spdlog::info("aggregate: job {}: {} views replayed from the checkpoint in {:.1f} s", id, job.replay,
+                     replay_timer.Seconds());
+      if (job.views_fused < job.num_fused) continue;
+      // Every view fused: the job's outputs. The grid is complete and no other
+      // thread changes it, so exports may read it meanwhile.
+      Timer t;
+      const fs::path dir = store_.JobDir(id);
+      std::vector<char> frame_ok(job.n, 0);
+      for (int k = 0; k < job.n; ++k) frame_ok[k] = store_.HasFrame(id, k);
+      const TriangleMesh raw = job.fusion->ExtractMesh(po.meshing);
+      // Each output atomically and durably (temporary name, fsync, rename): DONE means they are whole.
+      auto write_ply = [&](const TriangleMesh& m, const fs::path& path) {
+        const fs::path tmp = TempPathFor(path);
+        try {
+          WritePly(m, tmp);
+        } catch (...) {
+          std::error_code ec;
+          fs::remove(tmp, ec);
+          throw;
+        }
+        CommitFile(tmp, path);
+      };
+      write_ply(raw, dir / "mesh_raw.ply");
+      TriangleMesh mesh = raw;
+      ColourMesh(store_, job.geo, frame_ok, &mesh);
+      write_ply(mesh, dir / "mesh.ply");
+      if (po.write_vdb) {
+        const fs::path tmp = TempPathFor(dir / "grid.vdb");
+        try {
+          job.fusion->WriteVdb(tmp);
+        } catch (...) {
+          std::error_code ec;
+          fs::remove(tmp, ec);
+          throw;
+        }
+        CommitFile(tmp, dir / "grid.vdb");
+      }
+      job.triangles = static_cast<std::uint32_t>(mesh.triangles.size());
+      job.seconds_outputs = t.Seconds();
+      job.outcome = Job::kFinished;  // the serving thread marks the job DONE (Reap)
+    }
+  } catch (const std::exception& e) {
+    job.fusion_error = e.what();
+    job.outcome = Job::kFailed;
+    spdlog::error("aggregate: job {}: fusion failed: {}", id, e.what());
+  }
+  std::size_t left;
+  {
+    std::lock_guard<std::mutex> lk(job.queue_mu);
+    left = job.queue.size();
+  }
+  {
+    std::lock_guard<std::mutex> grid(job.grid_mu);
+    job.fusion.reset();  // the grid's memory goes back; what is not fused yet is in the store
+  }
+  spdlog::info("aggregate: job {}: fusion thread stopped, {} views fused{}", id, job.views_fused.load(),
+               left ? ", " + std::to_string(left) + " stored maps not fused (a restart fuses them)" : "");
+}
+
+void Aggregator::Reap(Job& job) {
+  if (!job.active) return;
+  std::vector<int> unreadable;
+  {
+    std::lock_guard<std::mutex> lk(job.queue_mu);
+    unreadable.swap(job.unreadable);
+  }
+  for (int v : unreadable)
+    if (job.dense_ok[v]) job.dense_ok[v] = 0, --job.dense_done;
+  if (!job.ingest_done && Clock::now() - job.last_ingest > std::chrono::duration<double>(options_.ingest_timeout_s)) {
+    EndJob(job, pb::STATE_FAILED,
+           "nothing from ingest for " + std::to_string(static_cast<int>(options_.ingest_timeout_s)) + " s after " +
+               std::to_string(job.frames_spooled) + " of " + std::to_string(job.n) +
+               " frames (lfrecon-ingest died and did not resume the job)");
+    return;
+  }
+  const int outcome = job.outcome;
+  if (outcome == Job::kFailed) {
+    EndJob(job, pb::STATE_FAILED, "fusion: " + job.fusion_error);
+  } else if (outcome == Job::kFinished) {
+    spdlog::info("aggregate: job {}: {} views fused, mesh {} triangles ({:.1f} s)", job.id, job.views_fused.load(),
+                 job.triangles, job.seconds_outputs);
+    EndJob(job, pb::STATE_DONE, "");
+  }
+}
+
+pb::JobStatus Aggregator::Status(const Job& job) const {
+  if (!job.active && job.final_status.state() != pb::STATE_UNKNOWN) return job.final_status;
+  pb::JobStatus s;
+  s.set_state(job.state);
+  s.set_num_views(job.num_fused);  // the views fused when it is done (the plan's selection)
+  s.set_frames_spooled(job.frames_spooled);
+  s.set_sparse_done(job.sparse_done);
+  s.set_dense_done(job.dense_done);
+  s.set_views_fused(job.views_fused);
+  s.set_message(job.message);
+  s.set_seconds(std::chrono::duration<double>(Clock::now() - job.created).count());
+  s.set_active_voxels(static_cast<std::uint32_t>(job.active_voxels));
+  s.set_leases_expired(job.leases_expired);
+  s.set_tasks_failed(job.tasks_failed);
+  if (job.state == pb::STATE_DONE) s.set_triangles(job.triangles);
+  return s;
+}
+
+void Aggregator::EndJob(Job& job, pb::JobState state, const std::string& message) {
+  job.state = state;
+  job.message = message;
+  job.leases.clear();
+  job.final_status = Status(job);
+  job.active = false;
+  StopFusion(job, false);  // it stops after the view it is integrating, and releases the grid
+  try {
+    store_.WriteText(job.id, "status.pb", job.final_status.SerializeAsString());
+  } catch (const std::exception& e) {  // a full disk: the job ends anyway; a restart loads it again
+    spdlog::error("aggregate: job {}: cannot record its end: {}", job.id, e.what());
+  }
+  if (state == pb::STATE_FAILED) spdlog::error("aggregate: job {} failed: {}", job.id, message);
+  else spdlog::info("aggregate: job {} {}", job.id, pb::JobState_Name(state));
+}
+
+}  // namespace lfrecon::svc
