@@ -6,7 +6,6 @@
 
 #include <Eigen/Geometry>
 #include <filesystem>
-#include <fstream>
 #include <iostream>
 #include <nlohmann/json.hpp>
 
@@ -15,6 +14,7 @@
 #include "io/dataset.h"
 #include "io/colmap_model.h"
 #include "pipeline/embedded_pipeline.h"
+#include "pipeline/pipeline_flags.h"
 #include "poses/pose_refinement.h"
 #include "run_outputs.h"
 #include "util/error.h"
@@ -37,6 +37,7 @@ struct RunArgs {
   double sigma_s = 0;
   bool no_refine_poses = false;
   RunOutputFlags outputs;  // mesh formats, point cloud, COLMAP workspace, report.html
+  bool all_views = false;
 };
 
 // OUT/sparse_refined/: the refined poses as a COLMAP text model (undistorted cameras).
@@ -62,19 +63,22 @@ void WriteRefinedModel(const Dataset& ds, const std::vector<PinholeView>& views,
 int RunPipeline(const RunArgs& args) {
   if (args.voxel_mm < 0) throw OptionError("--voxel-mm must be positive");
   args.outputs.MeshFormats();  // checked before any work
+  if (args.poisson && args.no_refine) throw OptionError("--poisson and --no-refine exclude each other");
+  if (args.all_views && !args.views.empty()) throw OptionError("--views and --all-views exclude each other");
+  // The flags a service job has too, mapped as the service maps them.
+  ReconstructionFlags flags;
+  flags.voxel_size = args.voxel_mm / 1000.0;
+  flags.sigma_s = args.sigma_s;
+  flags.no_densify = args.no_densify;
+  flags.color_views = args.color_views;
+  flags.all_views = args.all_views;
+  PipelineOptions options = OptionsFromFlags(flags);
   const Dataset ds = Dataset::Open(args.data.Resolve());
-  PipelineOptions options;
-  options.voxel_size = args.voxel_mm / 1000.0;
-  options.views = ParseViewRange(args.views, ds.NumViews());
+  if (!args.views.empty()) options.views = ParseViewRange(args.views, ds.NumViews());
   options.out_dir = args.out;
   options.write_depth = args.write_depth || args.outputs.NeedsDepth();
-  options.densify = !args.no_densify;
   options.refine = !args.no_refine;
   options.refine_options.use_poisson = args.poisson;
-  if (args.poisson && args.no_refine) throw OptionError("--poisson and --no-refine exclude each other");
-  options.color_views = args.color_views;
-  if (args.sigma_s < 0) throw OptionError("--sigma-s must be positive");
-  if (args.sigma_s > 0) (options.densify ? options.dense_sigma_s : options.fusion.sigma_s) = args.sigma_s;
   std::vector<PinholeView> views;
   std::vector<std::string> names;
   for (int i = 0; i < ds.NumViews(); ++i) {
@@ -84,14 +88,14 @@ int RunPipeline(const RunArgs& args) {
   spdlog::info("run: dataset {} ({} views, poses from {}, V from {})",
                ds.root().empty() ? std::string("(explicit sources)") : ds.root().string(), ds.NumViews(),
                ds.pose_source(), ds.bbox_source());
-  nlohmann::json pose_report;
   if (!args.no_refine_poses) {
     // A pass over the frames before the pipeline's own: the poses every stage uses come from it.
     auto frames = ds.OpenFrames();
     const PoseRefinementResult pr = RefinePoses(*frames, views, PoseRefinementOptions{});
     views = pr.views;
     const PoseRefinementStats& ps = pr.stats;
-    pose_report = {{"tracks", ps.tracks},
+    // report.json gains the pose refinement's figures (written once, by the pipeline).
+    options.extra_report["pose_refinement"] = {{"tracks", ps.tracks},
                    {"observations", ps.observations},
                    {"rms_reprojection_px", {ps.rms_reprojection_before_px, ps.rms_reprojection_after_px}},
                    {"median_reprojection_px", {ps.median_reprojection_before_px, ps.median_reprojection_after_px}},
@@ -105,15 +109,6 @@ int RunPipeline(const RunArgs& args) {
   EmbeddedPipeline pipeline(views, ds.bbox(), options, names);
   auto frames = ds.OpenFrames();
   const PipelineResult r = pipeline.Run(*frames);
-  if (!pose_report.is_null() && !args.out.empty()) {
-    // report.json (written by the pipeline) gains the pose refinement's figures.
-    const fs::path report_path = args.out / "report.json";
-    nlohmann::json report = r.report;
-    report["pose_refinement"] = pose_report;
-    std::ofstream f(report_path);
-    f << report.dump(2) << "\n";
-    if (!f) throw InputError(report_path.string(), "cannot write");
-  }
   if (!args.out.empty()) {
     std::vector<int> all(static_cast<std::size_t>(ds.NumViews()));
     for (int i = 0; i < ds.NumViews(); ++i) all[static_cast<std::size_t>(i)] = i;  // those with depth maps
@@ -138,9 +133,11 @@ void AddRunCommand(CLI::App& root, int* exit_code) {
   cmd->add_option("--out", args->out, "Output folder (mesh.ply, mesh_raw.ply, grid.vdb, report.json, mesh_turntable.png)")->required();
   cmd->add_option("--voxel-mm", args->voxel_mm, "Voxel edge in mm (default: the longest side of V / 256)");
   cmd->add_flag("--write-depth", args->write_depth, "Also write the fused per-view depth maps (depth/, confidence/ PFM)");
-  cmd->add_option("--views", args->views, "Views to process, A:B:STEP (0-based, B exclusive); default all. Every frame is still read "
-                   "and serves as a neighbour: on a dense video (lfrecon info: mean_step_deg well under 0.5) a "
-                   "STEP spacing views ~0.5 deg apart is several times faster (docs/benchmarks.md)");
+  cmd->add_option("--views", args->views, "Views to process, A:B:STEP (0-based, B exclusive); default: selected "
+                   "automatically, views >= 0.5 deg apart (on a dense video, lfrecon info: mean_step_deg well under "
+                   "0.5; sparser sequences keep every view). Every frame is still read and serves as a neighbour");
+  cmd->add_flag("--all-views", args->all_views,
+                "Process every view (no view selection): depth and fusion of each frame, also on a dense video");
   cmd->add_flag("--no-refine", args->no_refine,
                 "Skip the refinement (voxel carving): mesh.ply is then the fused iso-surface, like mesh_raw.ply");
   cmd->add_flag("--poisson", args->poisson,

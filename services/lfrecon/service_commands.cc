@@ -135,7 +135,7 @@ void AddServiceCommands(CLI::App& root, int* exit_code) {
       DatasetFlags data;
       Endpoints ep;
       double voxel_mm = 0, sigma_s = 0;
-      bool no_densify = false, wait = false;
+      bool no_densify = false, wait = false, all_views = false;
       int color_views = 8;
       double wait_s = 3600;
     };
@@ -146,6 +146,9 @@ void AddServiceCommands(CLI::App& root, int* exit_code) {
     cmd->add_option("--voxel-mm", a->voxel_mm, "Voxel edge in mm (default: the longest side of V / 256)");
     cmd->add_option("--sigma-s", a->sigma_s, "σ_s of the fusion (as lfrecon run)");
     cmd->add_flag("--no-densify", a->no_densify, "Fuse the filtered sparse maps (as lfrecon run)");
+    cmd->add_flag("--all-views", a->all_views,
+                  "Process every view (as lfrecon run --all-views); by default a dense video's views are selected "
+                  ">= 0.5 deg apart");
     cmd->add_option("--color-views", a->color_views, "Frames used to colour the mesh (0: none)")->capture_default_str();
     cmd->add_flag("--wait", a->wait, "Wait until the job ends and print its status");
     cmd->add_option("--wait-s", a->wait_s, "With --wait: give up after this many seconds")->capture_default_str();
@@ -167,6 +170,7 @@ void AddServiceCommands(CLI::App& root, int* exit_code) {
       spec->mutable_options()->set_sigma_s(a->sigma_s);
       spec->mutable_options()->set_no_densify(a->no_densify);
       spec->mutable_options()->set_color_views(a->color_views);
+      spec->mutable_options()->set_all_views(a->all_views);
       svc::JobPipelineOptions(spec->options());  // every job option checked here, as lfrecon run does (exit 2)
       const pb::Envelope reply = Call(a->ep, a->ep.ingest, req, a->ep.timeout_ms);
       const std::string job = reply.submit_reply().job_id();
