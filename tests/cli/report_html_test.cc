@@ -135,4 +135,55 @@ TEST(RunExports, UnknownMeshFormatIsAUsageError) {
   EXPECT_NE(r.output.find("--mesh-format"), std::string::npos) << r.output;
 }
 
+// "element NAME N" of a PLY header.
+long PlyCount(const fs::path& p, const std::string& element) {
+  const std::string b = ReadFile(p);
+  const std::smatch none;
+  std::smatch m;
+  const std::string header = b.substr(0, b.find("end_header"));
+  if (!std::regex_search(header, m, std::regex("element " + element + " (\\d+)"))) return -1;
+  return std::stol(m[1]);
+}
+
+long CountLines(const std::string& text, const std::string& prefix) {
+  long n = 0;
+  std::istringstream in(text);
+  std::string line;
+  while (std::getline(in, line)) n += line.rfind(prefix, 0) == 0;
+  return n;
+}
+
+// A small run with every export: mesh.obj/glb with mesh.ply's counts, points.ply,
+// and a COLMAP workspace that COLMAP's own stereo_fusion fuses (when colmap is installed).
+TEST(RunExports, FilesOtherToolsOpen) {
+  Dir tmp("exports");
+  const fs::path data = tmp.path / "data", run = tmp.path / "run";
+  ASSERT_EQ(Cli("-q synth --scene sphere --frames 90 --width 96 --height 54 --out " + data.string()).code, 0);
+  const Result r = Cli("-q run --dataset " + data.string() + " --out " + run.string() +
+                       " --no-refine-poses --no-refine --voxel-mm 4 --views 0:90:3 --mesh-format ply,obj,glb"
+                       " --point-cloud --export-depth-colmap");
+  ASSERT_EQ(r.code, 0) << r.output;
+  const long vertices = PlyCount(run / "mesh.ply", "vertex"), faces = PlyCount(run / "mesh.ply", "face");
+  ASSERT_GT(faces, 1000);
+  const std::string obj = ReadFile(run / "mesh.obj");
+  EXPECT_EQ(CountLines(obj, "v "), vertices);
+  EXPECT_EQ(CountLines(obj, "f "), faces);
+  EXPECT_EQ(ReadFile(run / "mesh.glb").substr(0, 4), "glTF");
+  EXPECT_GT(PlyCount(run / "points.ply", "vertex"), 1000);
+  long maps = 0;
+  for (const auto& e : fs::directory_iterator(run / "colmap" / "stereo" / "depth_maps")) {
+    ++maps;
+    EXPECT_EQ(ReadFile(e.path()).substr(0, 8), "96&54&1&") << e.path();
+  }
+  EXPECT_EQ(maps, 30);
+  EXPECT_TRUE(fs::exists(run / "report.html"));
+  if (!fs::exists("/usr/bin/colmap")) GTEST_SKIP() << "colmap is not installed: its stereo_fusion is not tried";
+  const Result fused = Shell("colmap stereo_fusion --workspace_path " + (run / "colmap").string() +
+                             " --input_type geometric --output_path " + (tmp.path / "fused.ply").string());
+  ASSERT_EQ(fused.code, 0) << fused.output;
+  // COLMAP fuses only pixels whose depth and normal agree in 5 views (10 degrees): a few
+  // hundred of these 96x54 maps (360 measured); 0 when poses, names or the layout are wrong.
+  EXPECT_GT(PlyCount(tmp.path / "fused.ply", "vertex"), 100) << fused.output.substr(fused.output.size() > 2000 ? fused.output.size() - 2000 : 0);
+}
+
 }  // namespace
