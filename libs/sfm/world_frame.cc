@@ -225,6 +225,29 @@ WorldFrame EstimateWorldFrame(const std::vector<Rigid3d>& cam_from_world, const 
   const Eigen::Vector3d extent = (box.max - box.min).cwiseMax(1e-9 * (box.max - box.min).norm() + 1e-12);
   box.min -= options.padding * extent;
   box.max += options.padding * extent;
+  // The top (not padded): thin and tall things on V's footprint (sticks, legs) have few
+  // sparse points and reach beyond the images' central part, so the points'
+  // top cuts them. V reaches up to where the views' upper image edge meets the
+  // vertical axis through V's centre (the median over the views): what stands
+  // there fills the frames up to their top edge.
+  {
+    std::vector<double> top;
+    const Eigen::Vector2d axis(box.Center().x(), box.Center().y());
+    for (int i : views) {
+      const Camera& cam = cameras[i];
+      const Eigen::Vector3d ray_cam = cam.Unproject(Eigen::Vector2d(cam.cx(), 0.0), 1.0);
+      const Eigen::Vector3d d = R_up * (cam_from_world[i].rotation.inverse() * ray_cam);
+      const Eigen::Vector3d c = R_up * CameraCenter(cam_from_world[i]);
+      const double dd = d.head<2>().squaredNorm();
+      if (dd < 1e-12) continue;
+      const double t = -(c.head<2>() - axis).dot(d.head<2>()) / dd;
+      if (t > 0) top.push_back(c.z() + t * d.z());
+    }
+    if (!top.empty()) {
+      const double z = Median(top);
+      if (z > box.max.z() && z - box.min.z() < 2 * (box.max - box.min).head<2>().maxCoeff()) box.max.z() = z;
+    }
+  }
 
   // Scale: the median camera distance from V's centre becomes camera_distance.
   std::vector<double> dist;

@@ -46,7 +46,10 @@ struct WorldFrameOptions {
   double max_error_px = 2.0;      // ... and points with a larger mean reprojection error
   double central_fraction = 0.8;  // "looked at": projects into the central part of an image (this fraction of W and H)
   double min_view_fraction = 0.7; // ... in at least this fraction of the views (in front of them)
-  double percentile = 0.02;       // V spans these percentiles of the kept points per axis ...
+  // V spans these percentiles of the kept points per axis (its top at least
+  // up to where the views' upper image edge meets the vertical axis through
+  // V's centre: thin and tall things have few points) ...
+  double percentile = 0.02;
   double padding = 0.1;           // ... grown by this fraction of its extent on each side
   int max_views = 300;            // views used for the "looked at" test (evenly spread)
   // Up: the cameras' mean up, or the normal of the camera centres' plane when
