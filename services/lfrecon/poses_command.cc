@@ -23,7 +23,7 @@ int RunPoses(const ColmapPosesOptions& options) {
     steps += buf;
   }
   std::printf(
-      "poses: %d/%d frames posed (%d/%d keyframes in the SfM model, every %d-th frame) in %.1f s; camera %s "
+      "poses: %d/%d frames posed (%d/%d keyframes in the SfM model, --step %d) in %.1f s; camera %s "
       "%dx%d f=%.1f px; V = [%.3f %.3f %.3f] - [%.3f %.3f %.3f] from %d of %d sparse points; dataset %s\n"
       "poses: %s\n",
       s.registered, s.frames, s.keyframes_registered, s.keyframes, options.step, s.seconds,
