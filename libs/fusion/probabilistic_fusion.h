@@ -66,6 +66,14 @@ struct FusionStats {
   std::size_t pruned_voxels = 0;  // dropped by pruning, summed over prunes (re-activated ones count again)
 };
 
+// `map` with FusionOptions::background_floor applied (see there): depths whose
+// point lies outside V and that are not labelled foreground (the ray passes
+// through V to the background), at least `gate_px` pixels (Euclidean) from
+// every foreground depth (labelled foreground, or a point inside V), get
+// confidence >= `floor`. Integrate applies it; exposed for tests and benches.
+DepthMap WithGatedBackgroundFloor(const DepthMap& map, const PinholeView& view, const BoundingBox& volume,
+                                  double floor, double gate_px);
+
 class ProbabilisticFusion {
  public:
   explicit ProbabilisticFusion(const FusionOptions& options);  // throws OptionError

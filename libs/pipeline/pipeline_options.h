@@ -67,6 +67,11 @@ struct PipelineOptions {
     FusionOptions f;
     f.activation_min_confidence = 0.01;
     f.probability_clamp = 0.03;
+    // FusionOptions::background_floor stays off: with 0.05 (gate 6 px) the
+    // full pipeline lost the generated sets' thin parts (quality table,
+    // 2026-12-02: tabletop thin recall 0.403 -> 0.174, thin-degraded F@5mm
+    // 0.634 -> 0.329; 0.329 still with only rays through V raised) although
+    // the figurines gained (F@5mm 0.787 -> 0.815); see FusionOptions::background_floor.
     return f;
   }();
   // σ_s of eq. 12-13 used instead of fusion.sigma_s when the maps are dense:

@@ -19,6 +19,9 @@ void DenseConsistencyOptions::Check() const {
   LFRECON_CHECK_OPTION(patch_radius_px >= 0 && patch_radius_px <= 3);
   LFRECON_CHECK_OPTION(rho_min >= 0 && rho_min <= 1);
   LFRECON_CHECK_OPTION(max_view_angle_deg > 0 && max_view_angle_deg < 90);
+  LFRECON_CHECK_OPTION(ncc_radius_px >= 0 && ncc_radius_px <= 7);
+  LFRECON_CHECK_OPTION(ncc_min >= -1 && ncc_min <= 1);
+  LFRECON_CHECK_OPTION(ncc_texture_min > 0);
 }
 
 DenseConsistencyAccumulator::DenseConsistencyAccumulator(const DenseConsistencyOptions& options)
@@ -72,6 +75,13 @@ cv::Mat PatchMeans(const cv::Mat& bgr, int r) {
   return out;
 }
 
+// Mean of the three channels (CV_32F).
+cv::Mat Grey(const cv::Mat& bgr) {
+  cv::Mat grey;
+  cv::transform(bgr, grey, cv::Matx13f(1.f / 3, 1.f / 3, 1.f / 3));
+  return grey;
+}
+
 }  // namespace
 
 void DenseConsistencyAccumulator::Begin(const ViewImage& reference, const DepthMap& dense, const cv::Mat& own) {
@@ -83,6 +93,15 @@ void DenseConsistencyAccumulator::Begin(const ViewImage& reference, const DepthM
     return;
   const cv::Mat means = PatchMeans(Colours(reference), options_.patch_radius_px);
   const bool skip_own = own.size() == dense.depth.size() && own.type() == CV_32F;
+  const int nr = options_.ncc_radius_px;
+  cv::Mat grey_mean, grey_sq_mean;
+  reference_grey_.release();
+  if (nr > 0) {
+    reference_grey_ = Grey(Colours(reference));
+    const cv::Size k(2 * nr + 1, 2 * nr + 1);
+    cv::blur(reference_grey_, grey_mean, k, cv::Point(-1, -1), cv::BORDER_REPLICATE);
+    cv::blur(reference_grey_.mul(reference_grey_), grey_sq_mean, k, cv::Point(-1, -1), cv::BORDER_REPLICATE);
+  }
   constexpr std::uint8_t kFg = static_cast<std::uint8_t>(DepthLabel::kForeground);
   for (int r = 0; r < dense.depth.rows; ++r) {
     const float* d = dense.depth.ptr<float>(r);
@@ -96,6 +115,13 @@ void DenseConsistencyAccumulator::Begin(const ViewImage& reference, const DepthM
       p.col = c;
       p.d = d[c];
       for (int k = 0; k < 3; ++k) p.colour[k] = m[3 * c + k];
+      if (nr > 0 && r >= nr && c >= nr && r + nr < dense.depth.rows && c + nr < dense.depth.cols) {
+        const float mu = grey_mean.at<float>(r, c);
+        const float sd = std::sqrt(std::max(0.0f, grey_sq_mean.at<float>(r, c) - mu * mu));
+        p.textured = sd >= options_.ncc_texture_min;
+        p.grey_mean = mu;
+        p.grey_std = sd;
+      }
       pixels_.push_back(p);
     }
   }
@@ -118,6 +144,9 @@ void DenseConsistencyAccumulator::Add(const ViewImage& neighbor) {
   const float margin = static_cast<float>(options_.patch_radius_px);
   const float max_x = static_cast<float>(means.cols) - margin, max_y = static_cast<float>(means.rows) - margin;
   const float inv2s2 = static_cast<float>(1.0 / (2.0 * options_.sigma * options_.sigma));
+  const int nr = options_.ncc_radius_px;
+  const cv::Mat grey = nr > 0 ? Grey(Colours(neighbor)) : cv::Mat();
+  const float n_samples = static_cast<float>((2 * nr + 1) * (2 * nr + 1));
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, pixels_.size(), 4096),
                     [&](const tbb::blocked_range<std::size_t>& range) {
                       for (std::size_t i = range.begin(); i != range.end(); ++i) {
@@ -133,6 +162,33 @@ void DenseConsistencyAccumulator::Add(const ViewImage& neighbor) {
                         for (int k = 0; k < 3; ++k) e += (g[k] - p.colour[k]) * (g[k] - p.colour[k]);
                         p.sum[side] += std::exp(-e * inv2s2);
                         ++p.count[side];
+                        if (!p.textured) continue;
+                        // ZNCC of the (2r+1)² patches, the neighbour's sampled
+                        // bilinearly around y (the same sub-pixel weights for all).
+                        const float fx = u - 0.5f - nr, fy = v - 0.5f - nr;
+                        if (!(fx >= 0 && fy >= 0)) continue;
+                        const int x0 = static_cast<int>(fx), y0 = static_cast<int>(fy);
+                        if (x0 + 2 * nr + 1 >= grey.cols || y0 + 2 * nr + 1 >= grey.rows) continue;
+                        const float ax = fx - x0, ay = fy - y0;
+                        const float w00 = (1 - ax) * (1 - ay), w01 = ax * (1 - ay), w10 = (1 - ax) * ay, w11 = ax * ay;
+                        float sg = 0, sgg = 0, srg = 0;
+                        for (int dy = 0; dy <= 2 * nr; ++dy) {
+                          const float* g0 = grey.ptr<float>(y0 + dy) + x0;
+                          const float* g1 = grey.ptr<float>(y0 + dy + 1) + x0;
+                          const float* rr = reference_grey_.ptr<float>(p.row - nr + dy) + (p.col - nr);
+                          for (int dx = 0; dx <= 2 * nr; ++dx) {
+                            const float gv = w00 * g0[dx] + w01 * g0[dx + 1] + w10 * g1[dx] + w11 * g1[dx + 1];
+                            sg += gv;
+                            sgg += gv * gv;
+                            srg += rr[dx] * gv;
+                          }
+                        }
+                        const float mg = sg / n_samples;
+                        const float var_g = std::max(0.0f, sgg / n_samples - mg * mg);
+                        const float cov = srg / n_samples - p.grey_mean * mg;
+                        const float ncc = var_g > 1e-12f ? cov / (p.grey_std * std::sqrt(var_g)) : 0.0f;
+                        p.ncc_sum[side] += ncc;
+                        ++p.ncc_count[side];
                       }
                     });
 }
@@ -143,6 +199,13 @@ cv::Mat DenseConsistencyAccumulator::Finish() {
     float best = -1;
     for (int s = 0; s < 2; ++s)
       if (p.count[s] > 0) best = std::max(best, p.sum[s] / p.count[s]);
+    if (p.textured && best >= 0) {
+      // The texture test fails: reported as ρ = 0, so the pixel is rejected like a low ρ.
+      float best_ncc = -2;
+      for (int s = 0; s < 2; ++s)
+        if (p.ncc_count[s] > 0) best_ncc = std::max(best_ncc, p.ncc_sum[s] / p.ncc_count[s]);
+      if (best_ncc > -2 && best_ncc < options_.ncc_min) best = 0;
+    }
     rho.at<float>(p.row, p.col) = best;
   }
   pixels_.clear();

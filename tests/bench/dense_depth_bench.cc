@@ -113,6 +113,9 @@ int main(int argc, char** argv) {
     else if (is("--consistency-patch")) popt.consistency.patch_radius_px = std::atoi(argv[++a]);
     else if (!std::strcmp(argv[a], "--consistency-stats")) consistency_stats = true;
     else if (is("--consistency-sigma")) popt.consistency.sigma = std::atof(argv[++a]);
+    else if (is("--ncc-radius")) popt.consistency.ncc_radius_px = std::atoi(argv[++a]);
+    else if (is("--ncc-min")) popt.consistency.ncc_min = std::atof(argv[++a]);
+    else if (is("--ncc-texture-min")) popt.consistency.ncc_texture_min = std::atof(argv[++a]);
     else if (!std::strcmp(argv[a], "--no-silhouette-splat-only")) popt.silhouette_pixels_splat_only = false;
     else if (is("--ridge")) popt.affine_ridge_px = std::atof(argv[++a]);
     else if (!std::strcmp(argv[a], "--oracle-depth")) oracle = true;

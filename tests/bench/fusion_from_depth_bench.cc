@@ -418,6 +418,7 @@ int main(int argc, char** argv) {
   double consistency = -1;
   double oracle_clean_mm = -1;
   double measured_floor = 0;
+  double bg_gate_px = 0;
   fs::path measured_dir;  // < 0: off; 0: GT views only, uncleaned; > 0: also drop |d - gt| > MM
   std::vector<std::string> variants;
   std::vector<double> min_comp_cm2;
@@ -452,6 +453,8 @@ int main(int argc, char** argv) {
       const auto comma = v.find(',');
       measured_floor = std::atof(v.substr(0, comma).c_str());
       if (comma != std::string::npos) measured_dir = v.substr(comma + 1);
+    } else if (k == "--bg-floor-gate") {  // the floor only at least PX pixels from any foreground depth
+      bg_gate_px = std::atof(v.c_str());
     } else if (k == "--bg-confidence-floor") {
       bg_floor = std::atof(v.c_str());
     } else if (k == "--band") {
@@ -646,11 +649,23 @@ int main(int argc, char** argv) {
     for (std::size_t k = 0; k < maps.size(); ++k) {
       const PinholeView view = ds.View(ids[k]);
       if (maps[k].confidence.empty()) continue;
+      cv::Mat dist;  // pixels to the nearest foreground depth (--bg-floor-gate)
+      if (bg_gate_px > 0) {
+        cv::Mat not_fg(maps[k].depth.size(), CV_8U, cv::Scalar(255));
+        for (int r = 0; r < maps[k].depth.rows; ++r)
+          for (int c = 0; c < maps[k].depth.cols; ++c) {
+            const float d = maps[k].depth.at<float>(r, c);
+            if (d > 0 && ds.bbox().Contains(view.Unproject(Eigen::Vector2d(c + 0.5, r + 0.5), d)))
+              not_fg.at<std::uint8_t>(r, c) = 0;
+          }
+        cv::distanceTransform(not_fg, dist, cv::DIST_L2, 3);
+      }
       for (int r = 0; r < maps[k].depth.rows; ++r)
         for (int c = 0; c < maps[k].depth.cols; ++c) {
           const float d = maps[k].depth.at<float>(r, c);
           float& cf = maps[k].confidence.at<float>(r, c);
           if (d <= 0 || cf >= bg_floor) continue;
+          if (!dist.empty() && dist.at<float>(r, c) < bg_gate_px) continue;
           if (ds.bbox().Contains(view.Unproject(Eigen::Vector2d(c + 0.5, r + 0.5), d))) continue;
           cf = static_cast<float>(bg_floor);
           ++raised;

@@ -485,3 +485,45 @@ TEST(ProbabilisticFusion, WritesVdb) {
 
 }  // namespace
 }  // namespace lfrecon
+
+namespace lfrecon {
+namespace {
+
+TEST(GatedBackgroundFloor, RaisesOnlyBackgroundFarFromTheForeground) {
+  // One row: foreground at columns 0-1, background (confidence 0.01) at 2-18, none at 19.
+  DepthMap m(1, 20);
+  for (int c = 0; c < 19; ++c) {
+    m.depth.at<float>(0, c) = c < 2 ? 1.0f : 3.0f;
+    m.confidence.at<float>(0, c) = 0.01f;
+    m.label.at<std::uint8_t>(0, c) = static_cast<std::uint8_t>(c < 2 ? DepthLabel::kForeground : DepthLabel::kBackground);
+  }
+  m.confidence.at<float>(0, 12) = 0.2f;  // already above the floor
+  // Identity view (K = I): pixel column c at depth d is the point (d (c + ½), d / 2, d);
+  // V holds depth 1 (foreground), not depth 3 (background beyond V).
+  const BoundingBox V{Eigen::Vector3d(-100, -1, 0), Eigen::Vector3d(100, 1, 2)};
+  const DepthMap out = WithGatedBackgroundFloor(m, PinholeView(), V, 0.05, 6.0);
+  for (int c = 0; c < 20; ++c) {
+    const float conf = out.confidence.at<float>(0, c);
+    if (c < 2) EXPECT_FLOAT_EQ(conf, 0.01f) << "foreground is not changed: " << c;
+    else if (c < 7) EXPECT_FLOAT_EQ(conf, 0.01f) << "background within 6 px of the foreground keeps its own: " << c;
+    else if (c == 12) EXPECT_FLOAT_EQ(conf, 0.2f);
+    else if (c < 19) EXPECT_FLOAT_EQ(conf, 0.05f) << "background beyond the gate is raised: " << c;
+    else EXPECT_FLOAT_EQ(conf, 0.0f) << "no depth stays none";
+  }
+  EXPECT_FLOAT_EQ(m.confidence.at<float>(0, 9), 0.01f) << "the input is not changed";
+  EXPECT_FLOAT_EQ(WithGatedBackgroundFloor(m, PinholeView(), V, 0.0, 6.0).confidence.at<float>(0, 9), 0.01f);
+  // Gate 0: every background depth beyond V.
+  EXPECT_FLOAT_EQ(WithGatedBackgroundFloor(m, PinholeView(), V, 0.05, 0.0).confidence.at<float>(0, 2), 0.05f);
+  // A background-labelled depth inside V (a thin part the propagation called
+  // background) is not raised, and gates its neighbours like foreground.
+  DepthMap t = m;
+  t.depth = m.depth.clone();
+  t.depth.at<float>(0, 15) = 1.0f;
+  const DepthMap tout = WithGatedBackgroundFloor(t, PinholeView(), V, 0.05, 6.0);
+  EXPECT_FLOAT_EQ(tout.confidence.at<float>(0, 15), 0.01f);
+  EXPECT_FLOAT_EQ(tout.confidence.at<float>(0, 10), 0.01f) << "5 px from the depth inside V";
+  EXPECT_FLOAT_EQ(tout.confidence.at<float>(0, 8), 0.05f) << "6 px from both";
+}
+
+}  // namespace
+}  // namespace lfrecon
