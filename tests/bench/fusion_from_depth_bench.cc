@@ -644,32 +644,13 @@ int main(int argc, char** argv) {
     std::printf("measured background floor %.3f: %zu measured background pixels, %zu raised\n", measured_floor,
                 measured, raised);
   }
-  if (bg_floor > 0) {  // depths beyond V (background) get at least this confidence
+  if (bg_floor > 0) {  // depths beyond V (background) get at least this confidence: FusionOptions::background_floor
     std::size_t raised = 0;
     for (std::size_t k = 0; k < maps.size(); ++k) {
-      const PinholeView view = ds.View(ids[k]);
       if (maps[k].confidence.empty()) continue;
-      cv::Mat dist;  // pixels to the nearest foreground depth (--bg-floor-gate)
-      if (bg_gate_px > 0) {
-        cv::Mat not_fg(maps[k].depth.size(), CV_8U, cv::Scalar(255));
-        for (int r = 0; r < maps[k].depth.rows; ++r)
-          for (int c = 0; c < maps[k].depth.cols; ++c) {
-            const float d = maps[k].depth.at<float>(r, c);
-            if (d > 0 && ds.bbox().Contains(view.Unproject(Eigen::Vector2d(c + 0.5, r + 0.5), d)))
-              not_fg.at<std::uint8_t>(r, c) = 0;
-          }
-        cv::distanceTransform(not_fg, dist, cv::DIST_L2, 3);
-      }
-      for (int r = 0; r < maps[k].depth.rows; ++r)
-        for (int c = 0; c < maps[k].depth.cols; ++c) {
-          const float d = maps[k].depth.at<float>(r, c);
-          float& cf = maps[k].confidence.at<float>(r, c);
-          if (d <= 0 || cf >= bg_floor) continue;
-          if (!dist.empty() && dist.at<float>(r, c) < bg_gate_px) continue;
-          if (ds.bbox().Contains(view.Unproject(Eigen::Vector2d(c + 0.5, r + 0.5), d))) continue;
-          cf = static_cast<float>(bg_floor);
-          ++raised;
-        }
+      const cv::Mat before = maps[k].confidence;
+      maps[k] = WithGatedBackgroundFloor(maps[k], ds.View(ids[k]), ds.bbox(), bg_floor, bg_gate_px);
+      raised += static_cast<std::size_t>(cv::countNonZero(maps[k].confidence != before));
     }
     std::printf("background confidence floor %.3f: %zu pixels raised\n", bg_floor, raised);
   }
