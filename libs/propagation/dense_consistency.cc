@@ -75,10 +75,13 @@ cv::Mat PatchMeans(const cv::Mat& bgr, int r) {
   return out;
 }
 
-// Mean of the three channels (CV_32F).
-cv::Mat Grey(const cv::Mat& bgr) {
+// Grey levels of Colours(v) (CV_32F): the frame's own `grey` (PrepareViewImage,
+// of `smoothed`) when it has one, else computed the same way.
+cv::Mat Grey(const ViewImage& v) {
+  const cv::Mat& colours = Colours(v);
+  if (&colours == &v.smoothed && v.grey.size() == v.smoothed.size() && v.grey.type() == CV_32F) return v.grey;
   cv::Mat grey;
-  cv::transform(bgr, grey, cv::Matx13f(1.f / 3, 1.f / 3, 1.f / 3));
+  cv::cvtColor(colours, grey, cv::COLOR_BGR2GRAY);
   return grey;
 }
 
@@ -97,7 +100,7 @@ void DenseConsistencyAccumulator::Begin(const ViewImage& reference, const DepthM
   cv::Mat grey_mean, grey_sq_mean;
   reference_grey_.release();
   if (nr > 0) {
-    reference_grey_ = Grey(Colours(reference));
+    reference_grey_ = Grey(reference);
     const cv::Size k(2 * nr + 1, 2 * nr + 1);
     cv::blur(reference_grey_, grey_mean, k, cv::Point(-1, -1), cv::BORDER_REPLICATE);
     cv::blur(reference_grey_.mul(reference_grey_), grey_sq_mean, k, cv::Point(-1, -1), cv::BORDER_REPLICATE);
@@ -145,7 +148,7 @@ void DenseConsistencyAccumulator::Add(const ViewImage& neighbor) {
   const float max_x = static_cast<float>(means.cols) - margin, max_y = static_cast<float>(means.rows) - margin;
   const float inv2s2 = static_cast<float>(1.0 / (2.0 * options_.sigma * options_.sigma));
   const int nr = options_.ncc_radius_px;
-  const cv::Mat grey = nr > 0 ? Grey(Colours(neighbor)) : cv::Mat();
+  const cv::Mat grey = nr > 0 ? Grey(neighbor) : cv::Mat();
   const float n_samples = static_cast<float>((2 * nr + 1) * (2 * nr + 1));
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, pixels_.size(), 4096),
                     [&](const tbb::blocked_range<std::size_t>& range) {
