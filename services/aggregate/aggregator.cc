@@ -50,7 +50,7 @@ Aggregator::Job* Aggregator::FindJob(const std::string& id) {
 
 pb::Envelope Aggregator::Handle(const pb::Envelope& req) { return Handle(req, nullptr); }
 
-pb::Envelope Aggregator::Handle(const pb::Envelope& req, Deferred* deferred) {
+pb::Envelope Aggregator::Handle(const pb::Envelope& req, Deferred* deferred, const std::string& peer_key) {
   try {
     switch (req.body_case()) {
       case pb::Envelope::kPing: {
@@ -59,7 +59,7 @@ pb::Envelope Aggregator::Handle(const pb::Envelope& req, Deferred* deferred) {
         return out;
       }
       case pb::Envelope::kTaskRequest:
-        return HandleTaskRequest(req);
+        return HandleTaskRequest(req, Worker(peer_key, req.task_request().worker()));
       default:
         break;
     }
@@ -88,7 +88,7 @@ pb::Envelope Aggregator::Handle(const pb::Envelope& req, Deferred* deferred) {
         return out;
       }
       case pb::Envelope::kTaskResult:
-        return HandleTaskResult(*job, req.task_result());
+        return HandleTaskResult(*job, req.task_result(), Worker(peer_key, req.task_result().worker()));
       case pb::Envelope::kJobCreated:
         job->last_ingest = Clock::now();
         return ack;  // FindJob loaded it
@@ -131,6 +131,9 @@ void Aggregator::Serve() {
   RouterServer server(context, options_.endpoint, options_.max_message_bytes, options_.security);
   spdlog::info("aggregate: serving on {} (store {}, lease {} ms)", options_.endpoint, store_.root().string(),
                options_.lease_ms);
+  if (!options_.security.curve())
+    spdlog::warn("aggregate: no CURVE keys: task results are matched to their leases by the worker name they "
+                 "give, which any peer that reaches {} can claim", options_.endpoint);
   // Exports run off this thread, one at a time per lane (plain, refined), in
   // arrival order; each is answered when its work is done.
   struct Pending {
@@ -165,7 +168,7 @@ void Aggregator::Serve() {
       *reply.mutable_error() = in->error;
     } else {
       Deferred deferred;
-      reply = Handle(in->envelope, &deferred);
+      reply = Handle(in->envelope, &deferred, in->peer_key);
       if (deferred.work) {
         LaneQueue& q = lanes[deferred.lane == Lane::kRefine ? 1 : 0];
         if (static_cast<int>(q.pending.size()) < options_.max_queued_exports) {

@@ -95,11 +95,20 @@ class Aggregator {
   };
   // `deferred` null: everything is answered here; else a request whose work
   // can run elsewhere sets deferred->work and the returned envelope is meaningless.
-  pb::Envelope Handle(const pb::Envelope& request, Deferred* deferred);
+  // `peer_key`: the sender's CURVE public key (RouterServer::Incoming::peer_key),
+  // empty on a socket without CURVE.
+  pb::Envelope Handle(const pb::Envelope& request, Deferred* deferred, const std::string& peer_key = "");
   Job* FindJob(const std::string& id);  // loads from the store on first use; nullptr if unknown
   std::unique_ptr<Job> LoadJob(const std::string& id);
-  pb::Envelope HandleTaskRequest(const pb::Envelope& req);
-  pb::Envelope HandleTaskResult(Job& job, const pb::TaskResult& result);
+  // A worker as leases know it: `id` is who it is (with CURVE its public key,
+  // authenticated by the handshake; without, the name it gives, which any
+  // peer can claim), `label` how logs and messages name it.
+  struct WorkerId {
+    std::string id, label;
+  };
+  static WorkerId Worker(const std::string& peer_key, const std::string& name);
+  pb::Envelope HandleTaskRequest(const pb::Envelope& req, const WorkerId& worker);
+  pb::Envelope HandleTaskResult(Job& job, const pb::TaskResult& result, const WorkerId& worker);
   pb::Envelope HandleExport(Job& job, const pb::ExportRequest& req, Deferred* deferred);
   Work RefinedExport(const Job& job) const;
   Work PlainExport(Job& job) const;
@@ -122,7 +131,7 @@ class Aggregator {
   AggregatorOptions options_;
   JobStore store_;
   std::unique_ptr<FileLock> lock_;  // flock on the store folder: one aggregator per store
-  std::map<std::string, Clock::time_point> seen_workers_[3];  // per stage: worker -> its last task request
+  std::map<std::string, Clock::time_point> seen_workers_[3];  // per stage: worker id -> its last task request
   std::map<std::string, std::unique_ptr<Job>> jobs_;
 };
 

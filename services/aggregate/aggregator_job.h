@@ -35,12 +35,16 @@ struct Aggregator::Job {
   std::vector<char> frame_ok, sparse_ok, dense_ok;
   int frames_spooled = 0, sparse_done = 0, dense_done = 0;  // dense_done: maps received (stored)
   bool ingest_done = false;
-  std::map<std::pair<int, int>, std::pair<Clock::time_point, std::string>> leases;  // (stage, view) -> deadline, worker
+  struct Lease {
+    Clock::time_point deadline;
+    WorkerId worker;
+  };
+  std::map<std::pair<int, int>, Lease> leases;  // (stage, view) -> its lease
   int leases_expired = 0;
-  std::map<std::pair<int, int>, std::set<std::string>> leased_to;  // (stage, view) -> every worker given it
+  std::map<std::pair<int, int>, std::set<std::string>> leased_to;  // (stage, view) -> every worker (id) given it
   struct Tries {
     int failures = 0;
-    std::set<std::string> failed_on;  // workers it failed on
+    std::set<std::string> failed_on;  // workers (ids) it failed on
   };
   std::map<std::pair<int, int>, Tries> tries;
   int tasks_failed = 0;

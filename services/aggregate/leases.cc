@@ -13,12 +13,17 @@
 namespace lfrecon::svc {
 namespace fs = std::filesystem;
 
+Aggregator::WorkerId Aggregator::Worker(const std::string& peer_key, const std::string& name) {
+  if (peer_key.empty()) return {name, "'" + name + "'"};
+  return {"key:" + peer_key, "'" + name + "' (key " + KeyFingerprint(peer_key) + ")"};
+}
+
 void Aggregator::ExpireLeases(Job& job) {
   const auto now = Clock::now();
-  std::vector<std::pair<std::pair<int, int>, std::string>> expired;
+  std::vector<std::pair<std::pair<int, int>, WorkerId>> expired;
   for (auto it = job.leases.begin(); it != job.leases.end();) {
-    if (it->second.first < now) {
-      expired.emplace_back(it->first, it->second.second);
+    if (it->second.deadline < now) {
+      expired.emplace_back(it->first, it->second.worker);
       it = job.leases.erase(it);
     } else {
       ++it;
@@ -26,8 +31,9 @@ void Aggregator::ExpireLeases(Job& job) {
   }
   for (const auto& [key, worker] : expired) {
     ++job.leases_expired;
-    if (FailTask(job, key.first, key.second, worker,
-                 "not returned by " + worker + " within its lease of " + std::to_string(options_.lease_ms) + " ms"))
+    if (FailTask(job, key.first, key.second, worker.id,
+                 "not returned by " + worker.label + " within its lease of " + std::to_string(options_.lease_ms) +
+                     " ms"))
       return;
   }
 }
@@ -55,7 +61,7 @@ bool Aggregator::OtherWorkerAlive(int stage, const std::string& worker) const {
   return false;
 }
 
-pb::Envelope Aggregator::HandleTaskRequest(const pb::Envelope& req) {
+pb::Envelope Aggregator::HandleTaskRequest(const pb::Envelope& req, const WorkerId& worker) {
   const pb::TaskRequest& tr = req.task_request();
   const int stage = tr.stage();
   if (stage != pb::STAGE_DEPTH && stage != pb::STAGE_PROPAGATE)
@@ -65,8 +71,8 @@ pb::Envelope Aggregator::HandleTaskRequest(const pb::Envelope& req) {
     const auto old = Clock::now() - std::chrono::seconds(60);
     for (auto it = seen.begin(); it != seen.end();) it = it->second < old ? seen.erase(it) : std::next(it);
   }
-  seen[tr.worker()] = Clock::now();
-  const bool others = OtherWorkerAlive(stage, tr.worker());
+  seen[worker.id] = Clock::now();
+  const bool others = OtherWorkerAlive(stage, worker.id);
   for (auto& [id, jp] : jobs_) {
     Job& job = *jp;
     if (!job.active) continue;
@@ -76,7 +82,7 @@ pb::Envelope Aggregator::HandleTaskRequest(const pb::Envelope& req) {
       if (job.leases.count({stage, v})) continue;
       if (others) {  // a task that failed on this worker goes to another one
         const auto t = job.tries.find({stage, v});
-        if (t != job.tries.end() && t->second.failed_on.count(tr.worker())) continue;
+        if (t != job.tries.end() && t->second.failed_on.count(worker.id)) continue;
       }
       pb::Envelope out = NewEnvelope(id);
       pb::Task* task = out.mutable_task();
@@ -104,10 +110,10 @@ pb::Envelope Aggregator::HandleTaskRequest(const pb::Envelope& req) {
       task->set_stage(static_cast<pb::Stage>(stage));
       task->set_view(v);
       task->set_lease_ms(options_.lease_ms);
-      job.leases[{stage, v}] = {Clock::now() + std::chrono::milliseconds(options_.lease_ms), tr.worker()};
-      job.leased_to[{stage, v}].insert(tr.worker());
+      job.leases[{stage, v}] = {Clock::now() + std::chrono::milliseconds(options_.lease_ms), worker};
+      job.leased_to[{stage, v}].insert(worker.id);
       spdlog::debug("aggregate: job {}: {} of view {} -> {}", id, stage == pb::STAGE_DEPTH ? "depth" : "propagate", v,
-                    tr.worker());
+                    worker.label);
       return out;
     }
   }
@@ -116,7 +122,7 @@ pb::Envelope Aggregator::HandleTaskRequest(const pb::Envelope& req) {
   return out;
 }
 
-pb::Envelope Aggregator::HandleTaskResult(Job& job, const pb::TaskResult& r) {
+pb::Envelope Aggregator::HandleTaskResult(Job& job, const pb::TaskResult& r, const WorkerId& worker) {
   const int v = static_cast<int>(r.view());
   if (!job.active) {  // ended meanwhile (cancelled, failed, done): nothing to do
     pb::Envelope ack = NewEnvelope(job.id);
@@ -128,22 +134,28 @@ pb::Envelope Aggregator::HandleTaskResult(Job& job, const pb::TaskResult& r) {
     return ErrorEnvelope(pb::ERROR_BAD_REQUEST, "unknown stage", job.id);
   // A result must answer a lease: this view, this stage, given to this worker
   // (now or before it expired; a restarted aggregator has given nothing yet).
+  // With CURVE the worker is its key, not the name it gives: another worker's
+  // key cannot answer (or fail) a lease, whatever name it claims.
   const std::pair<int, int> key{static_cast<int>(r.stage()), v};
   const std::string task = std::string(r.stage() == pb::STAGE_DEPTH ? "depth" : "propagate") + " of view " +
                            std::to_string(v);
   const auto given = job.leased_to.find(key);
-  if (given == job.leased_to.end() || !given->second.count(r.worker()))
-    return ErrorEnvelope(pb::ERROR_BAD_REQUEST, task + " was not leased to '" + r.worker() + "'", job.id);
+  if (given == job.leased_to.end() || !given->second.count(worker.id)) {
+    // Leased to someone else: not this peer's to answer. Never leased: a bad request.
+    const bool others = given != job.leased_to.end() && !given->second.empty();
+    return ErrorEnvelope(others ? pb::ERROR_FORBIDDEN : pb::ERROR_BAD_REQUEST,
+                         task + " was not leased to " + worker.label, job.id);
+  }
   const bool done = r.stage() == pb::STAGE_DEPTH ? job.sparse_ok[v] : job.dense_ok[v];
   const auto lease = job.leases.find(key);
   if (!r.error().empty()) {
-    if (lease != job.leases.end() && lease->second.second == r.worker()) job.leases.erase(lease);
-    if (!done) FailTask(job, key.first, v, r.worker(), r.worker() + ": " + r.error());
+    if (lease != job.leases.end() && lease->second.worker.id == worker.id) job.leases.erase(lease);
+    if (!done) FailTask(job, key.first, v, worker.id, worker.label + ": " + r.error());
     pb::Envelope ack = NewEnvelope(job.id);
     ack.mutable_ack();
     return ack;
   }
-  const std::string what = "task result of view " + std::to_string(v) + " from " + r.worker();
+  const std::string what = "task result of view " + std::to_string(v) + " from " + worker.label;
   if (r.map().view() != r.view())
     return ErrorEnvelope(pb::ERROR_BAD_REQUEST, what + ": its depth map says view " + std::to_string(r.map().view()),
                          job.id);

@@ -50,6 +50,9 @@ bool RoleMaySend(Role role, pb::Envelope::BodyCase body) {
     case pb::Envelope::kStatus:
     case pb::Envelope::kExportRequest:
     case pb::Envelope::kCancel:
+    case pb::Envelope::kStreamOpen:
+    case pb::Envelope::kStreamFrame:
+    case pb::Envelope::kStreamEnd:
       return role == Role::kClient;
     case pb::Envelope::kTaskRequest:
     case pb::Envelope::kTaskResult:
@@ -344,7 +347,9 @@ struct ZapHandler::State {
       if (e) {
         status = "200";
         text = "OK";
-        user = std::string(RoleName(e->role)) + ":" + e->name;
+        // "role:KEY:name": the key (40 Z85 characters, fixed length) is the
+        // peer's identity; the name is only for people.
+        user = std::string(RoleName(e->role)) + ":" + z85 + ":" + e->name;
         ++accepted;
         spdlog::debug("auth: {} from {} accepted as {}", KeyFingerprint(z85), str(3), user);
       } else {
@@ -387,14 +392,21 @@ ZapHandler::~ZapHandler() {
 long long ZapHandler::accepted() const { return state_->accepted; }
 long long ZapHandler::denied() const { return state_->denied; }
 
-Role PeerRole(zmq::message_t& msg, std::string* name) {
+Role PeerRole(zmq::message_t& msg, std::string* name, std::string* public_key) {
   const char* uid = zmq_msg_gets(msg.handle(), "User-Id");
   if (!uid) return Role::kNone;
   const std::string s(uid);
+  // "role:KEY:name" as the ZAP handler sets it; the key has a fixed length
+  // (Z85 has ':' among its digits, so it is cut by length, not by ':').
   const auto colon = s.find(':');
+  if (colon == std::string::npos) return Role::kNone;
   const auto role = ParseRole(s.substr(0, colon));
-  if (!role || colon == std::string::npos) return Role::kNone;
-  if (name) *name = s.substr(colon + 1);
+  const std::size_t key_end = colon + 1 + kZ85KeyChars;
+  if (!role || s.size() < key_end + 1 || s[key_end] != ':') return Role::kNone;
+  const std::string key = s.substr(colon + 1, kZ85KeyChars);
+  if (!ValidZ85Key(key)) return Role::kNone;
+  if (name) *name = s.substr(key_end + 1);
+  if (public_key) *public_key = key;
   return *role;
 }
 

@@ -5,10 +5,13 @@
 //    (`--key`, a secret key file from `lfrecon keygen`) and an allow-list of
 //    the public keys that may connect (`--allow`, a file or a folder of *.pub
 //    files). Its ZAP handler (inproc://zeromq.zap.01, a thread of the daemon)
-//    accepts only listed keys and gives each connection the key's role as its
-//    User-Id ("role:name"); a connection with any other key, or none, is
+//    accepts only listed keys and gives each connection the key's role, the
+//    key itself and its name as its User-Id ("role:KEY:name"): the key is the
+//    peer's authenticated identity (its name in the allow-list need not be
+//    unique, and what a peer says of itself in a message is not proof of
+//    anything). A connection with any other key, or none, is
 //    refused at the handshake: it never gets a reply.
-//  * Roles: `client` (submit, status, export, cancel), `worker` (task
+//  * Roles: `client` (submit, stream open/frame/end, status, export, cancel), `worker` (task
 //    requests and results), `ingest` (the ingest daemon's notices to the
 //    aggregator), `server` (a daemon's own key; may only ping). Every message
 //    is checked against its sender's role when it is received (RouterServer);
@@ -128,9 +131,9 @@ class ZapHandler {
   std::unique_ptr<State> state_;
 };
 
-// The role and name of the peer that sent `msg` through a CURVE server socket
-// (from the User-Id its ZAP handler set); kNone without one.
-Role PeerRole(zmq::message_t& msg, std::string* name = nullptr);
+// The role, name and public key (Z85) of the peer that sent `msg` through a
+// CURVE server socket (from the User-Id its ZAP handler set); kNone without one.
+Role PeerRole(zmq::message_t& msg, std::string* name = nullptr, std::string* public_key = nullptr);
 
 // Command-line flags of the keys. Defaults from the environment:
 // LFRECON_KEY (own key file), LFRECON_ALLOW (allow-list), and the server key

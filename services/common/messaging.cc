@@ -178,7 +178,7 @@ std::optional<RouterServer::Incoming> RouterServer::Receive(std::chrono::millise
   frames.pop_back();
   in.route = std::move(frames);
   in.bytes = payload.size();
-  in.role = curve_ ? PeerRole(payload, &in.peer) : Role::kLocal;
+  in.role = curve_ ? PeerRole(payload, &in.peer, &in.peer_key) : Role::kLocal;
   in.ok = DecodeEnvelope(payload.data(), payload.size(), max_message_bytes_, &in.envelope, &in.error);
   if (in.ok && !RoleMaySend(in.role, in.envelope.body_case())) {
     in.ok = false;

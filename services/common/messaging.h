@@ -102,6 +102,7 @@ class RouterServer {
     std::size_t bytes = 0;
     Role role = Role::kNone;  // the sender's (kLocal on a socket without CURVE)
     std::string peer;         // its key's name in the allow-list
+    std::string peer_key;     // its CURVE public key (Z85): who it is; empty without CURVE
   };
   // With CURVE (security.key) it starts the context's ZAP handler before it
   // binds: the context must have no other. Throws OptionError when the

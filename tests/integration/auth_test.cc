@@ -37,19 +37,7 @@ using std::chrono::milliseconds;
 const std::string kBin = lfrecon::testing::BinDir();
 constexpr double kVoxelMm = lfrecon::testing::kReferenceVoxelMm;
 
-// A TCP port on 127.0.0.1 that was free a moment ago.
-int FreePort() {
-  const int fd = ::socket(AF_INET, SOCK_STREAM, 0);
-  sockaddr_in a{};
-  a.sin_family = AF_INET;
-  a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
-  a.sin_port = 0;
-  ::bind(fd, reinterpret_cast<sockaddr*>(&a), sizeof(a));
-  socklen_t len = sizeof(a);
-  ::getsockname(fd, reinterpret_cast<sockaddr*>(&a), &len);
-  ::close(fd);
-  return ntohs(a.sin_port);
-}
+using lfrecon::testing::FreePort;
 
 pb::Envelope Ping() {
   pb::Envelope p = NewEnvelope();

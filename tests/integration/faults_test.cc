@@ -20,6 +20,7 @@
 #include <sstream>
 #include <thread>
 
+#include "common/auth.h"
 #include "common/job_store.h"
 #include "common/messaging.h"
 #include "common/test_util.h"
@@ -238,21 +239,24 @@ TEST_F(FaultsTest, ResultMustMatchItsLease) {
   ASSERT_TRUE(task && task->has_task()) << (task && task->has_error() ? task->error().message() : "");
   const int v = static_cast<int>(task->task().view());
   const int w = 96, h = 54;
-  auto expect_refused = [&](const pb::Envelope& env, const std::string& needle) {
+  auto expect_refused = [&](const pb::Envelope& env, const std::string& needle,
+                            pb::ErrorCode code = pb::ERROR_BAD_REQUEST) {
     auto r = Ask(env);
     ASSERT_TRUE(r.has_value());
     ASSERT_TRUE(r->has_error()) << needle << ": accepted";
-    EXPECT_EQ(r->error().code(), pb::ERROR_BAD_REQUEST);
+    EXPECT_EQ(r->error().code(), code) << r->error().message();
     EXPECT_NE(r->error().message().find(needle), std::string::npos) << r->error().message();
   };
   expect_refused(Result(job, pb::STAGE_DEPTH, v, "w1", 999, w, h), "says view 999");
-  expect_refused(Result(job, pb::STAGE_DEPTH, v, "intruder", v, w, h), "not leased to 'intruder'");
+  // Leased to another worker (here, without CURVE, another name): not this one's to answer.
+  expect_refused(Result(job, pb::STAGE_DEPTH, v, "intruder", v, w, h), "not leased to 'intruder'",
+                 pb::ERROR_FORBIDDEN);
   expect_refused(Result(job, pb::STAGE_DEPTH, v + 1, "w1", v + 1, w, h), "not leased");
   expect_refused(Result(job, pb::STAGE_PROPAGATE, v, "w1", v, w, h), "not leased");
   expect_refused(Result(job, pb::STAGE_DEPTH, v, "w1", v, w / 2, h), "48x54");
   pb::Envelope forged_error = Result(job, pb::STAGE_DEPTH, v, "intruder", v, w, h);
   forged_error.mutable_task_result()->set_error("forged");
-  expect_refused(forged_error, "not leased");
+  expect_refused(forged_error, "not leased", pb::ERROR_FORBIDDEN);
   EXPECT_FALSE(fs::exists(store_ / job / "sparse" / "000999.pb"));
   EXPECT_EQ(Status(job).sparse_done(), 0u);
   EXPECT_NE(Status(job).state(), pb::STATE_FAILED);
@@ -260,6 +264,80 @@ TEST_F(FaultsTest, ResultMustMatchItsLease) {
   auto ok = Ask(Result(job, pb::STAGE_DEPTH, v, "w1", v, w, h));
   ASSERT_TRUE(ok && ok->has_ack()) << (ok && ok->has_error() ? ok->error().message() : "");
   EXPECT_EQ(Status(job).sparse_done(), 1u);
+  EXPECT_TRUE(JobStore(store_).HasMap(job, pb::MAP_SPARSE, v));
+}
+
+// With CURVE a result is matched to its lease by the worker's key, not by the
+// name it gives (any peer can claim a name): a second worker key that claims
+// the first's name cannot answer (or fail) the first's lease; the lease stays
+// the first's, whose result is taken. (Matched by name, both were accepted.)
+TEST_F(FaultsTest, ResultForAnotherWorkersLeaseIsRefusedByKey) {
+  const fs::path kd = tmp_->path() / "keys";
+  fs::create_directories(kd);
+  const std::pair<const char*, Role> keys[] = {{"aggregate", Role::kServer}, {"ingest", Role::kIngest},
+                                                {"client", Role::kClient},   {"w1", Role::kWorker},
+                                                {"w2", Role::kWorker}};
+  const fs::path allow = kd / "aggregate.allow";
+  {
+    std::ofstream list(allow);
+    for (const auto& [name, role] : keys) {
+      WriteKeyFiles(kd, name, role, GenerateKeyPair(), false);
+      if (role != Role::kServer) list << ReadFileBytes(kd / (std::string(name) + ".pub"));
+    }
+  }
+  agg_ = "tcp://127.0.0.1:" + std::to_string(lfrecon::testing::FreePort());
+  Start("lfrecon-aggregate", {"--bind", agg_, "--store", store_.string(), "--key", (kd / "aggregate.key").string(),
+                              "--allow", allow.string()});
+  auto as = [&](const std::string& name) {
+    ClientSecurity s;
+    s.key = ReadSecretKeyFile(kd / (name + ".key"));
+    s.server_key = ReadPublicKeyFile(kd / "aggregate.pub");
+    return std::make_unique<RequestClient>(context_, agg_, kDefaultMaxMessageBytes, s);
+  };
+  client_ = as("ingest");  // CreateJobWithFrames plays ingest
+  pb::Envelope ping = NewEnvelope();
+  ping.mutable_ping();
+  bool up = false;
+  for (int i = 0; i < 50 && !up; ++i) {
+    auto r = client_->Request(ping, milliseconds(200));
+    up = r && r->has_pong();
+  }
+  ASSERT_TRUE(up);
+  const std::string job = CreateJobWithFrames(pb::JobSpec());
+  client_ = as("client");  // Status
+  auto w1 = as("w1"), w2 = as("w2");
+  pb::Envelope tr = NewEnvelope();
+  tr.mutable_task_request()->set_stage(pb::STAGE_DEPTH);
+  tr.mutable_task_request()->set_worker("w1");
+  auto task = w1->Request(tr, milliseconds(5000));
+  ASSERT_TRUE(task && task->has_task()) << (task && task->has_error() ? task->error().message() : "no reply");
+  const int v = static_cast<int>(task->task().view());
+  const int w = 96, h = 54;
+  auto expect_forbidden = [&](const pb::Envelope& env, const std::string& what) {
+    auto r = w2->Request(env, milliseconds(5000));
+    ASSERT_TRUE(r.has_value()) << what << ": no reply";
+    ASSERT_TRUE(r->has_error()) << what << ": accepted";
+    EXPECT_EQ(r->error().code(), pb::ERROR_FORBIDDEN) << what << ": " << r->error().message();
+    EXPECT_NE(r->error().message().find("not leased to 'w1' (key "), std::string::npos) << r->error().message();
+  };
+  expect_forbidden(Result(job, pb::STAGE_DEPTH, v, "w1", v, w, h), "w2's result as w1");
+  pb::Envelope forged_error = Result(job, pb::STAGE_DEPTH, v, "w1", v, w, h);
+  forged_error.mutable_task_result()->set_error("forged");
+  expect_forbidden(forged_error, "w2's error result as w1");
+  pb::JobStatus s = Status(job);
+  EXPECT_EQ(s.sparse_done(), 0u);
+  EXPECT_EQ(s.tasks_failed(), 0u);
+  EXPECT_NE(s.state(), pb::STATE_FAILED);
+  // w2, still claiming to be w1, is given another view: v is w1's lease.
+  auto other = w2->Request(tr, milliseconds(5000));
+  ASSERT_TRUE(other && other->has_task()) << (other && other->has_error() ? other->error().message() : "no reply");
+  EXPECT_NE(static_cast<int>(other->task().view()), v);
+  // w1's own result is taken (the name it gives does not matter: its key does).
+  auto ok = w1->Request(Result(job, pb::STAGE_DEPTH, v, "any name", v, w, h), milliseconds(5000));
+  ASSERT_TRUE(ok && ok->has_ack()) << (ok && ok->has_error() ? ok->error().message() : "no reply");
+  s = Status(job);
+  EXPECT_EQ(s.sparse_done(), 1u);
+  EXPECT_EQ(s.tasks_failed(), 0u);
   EXPECT_TRUE(JobStore(store_).HasMap(job, pb::MAP_SPARSE, v));
 }
 
