@@ -145,6 +145,15 @@ FileLock::~FileLock() {
   if (fd_ >= 0) ::close(fd_);
 }
 
+std::unique_ptr<FileLock> LockStoreForIngest(const JobStore& store) {
+  try {
+    return std::make_unique<FileLock>(store.root() / kIngestLockName);
+  } catch (const std::runtime_error& e) {
+    throw std::runtime_error("another lfrecon-ingest serves the job store " + store.root().string() + " (" +
+                             e.what() + ")");
+  }
+}
+
 JobStore::JobStore(fs::path root) : root_(std::move(root)) { fs::create_directories(root_); }
 
 bool JobStore::ValidJobId(const std::string& id) {

@@ -15,6 +15,7 @@
 // Every file is written to a temporary name and renamed, so a reader (or a
 // restart after kill -9) never sees half a file.
 #include <filesystem>
+#include <memory>
 #include <optional>
 #include <string>
 
@@ -92,6 +93,13 @@ class FileLock {
  private:
   int fd_ = -1;
 };
+
+// One lfrecon-ingest per job store: an exclusive FileLock on STORE/.ingest.lock
+// (the aggregator's lock is on the store folder itself, so the two daemons do
+// not exclude each other; the name is not a job id, so no daemon takes it for
+// a job). Throws std::runtime_error naming the store when another ingest holds it.
+constexpr const char* kIngestLockName = ".ingest.lock";
+std::unique_ptr<FileLock> LockStoreForIngest(const JobStore& store);
 
 // Conversions between the messages and the library types (all validate sizes
 // and finiteness and throw InputError with `what` naming the source).

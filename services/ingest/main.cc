@@ -138,6 +138,8 @@ int UnfinishedJobs(const JobStore& store) {
 int Serve(const IngestOptions& o) {
   zmq::context_t context(1);
   JobStore store(o.store);
+  // One ingest per store: a second would spool the same unfinished jobs again.
+  const auto store_lock = LockStoreForIngest(store);
   RouterServer server(context, o.endpoint, o.max_message_bytes, o.security);
   RequestClient agg(context, o.aggregate, o.max_message_bytes, o.to_aggregate);
   // One thread per job being spooled; finished ones are joined as they end.

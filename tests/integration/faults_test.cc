@@ -410,6 +410,30 @@ TEST_F(FaultsTest, SecondAggregatorOnTheStoreRefusesToStart) {
   EXPECT_TRUE(third->Running());
 }
 
+// Two ingest daemons on one store would both resume (spool) every unfinished
+// job: the second refuses to start (a lock in the store; the aggregator,
+// whose lock is the folder itself, runs beside either).
+TEST_F(FaultsTest, SecondIngestOnTheStoreRefusesToStart) {
+  StartAggregator();
+  DaemonProcess* first = StartIngest();
+  ASSERT_TRUE(Ping(ing_));
+  const std::string other = "ipc://" + (tmp_->path() / "ing2.sock").string();
+  DaemonProcess* second =
+      Start("lfrecon-ingest", {"--bind", other, "--aggregate", agg_, "--store", store_.string()});
+  EXPECT_EQ(second->WaitExit(std::chrono::seconds(10)), 1);
+  EXPECT_NE(second->Log().find("another lfrecon-ingest serves the job store"), std::string::npos)
+      << second->Log();
+  EXPECT_TRUE(first->Running());
+  EXPECT_TRUE(Ping(ing_));
+  EXPECT_TRUE(Ping(agg_));
+  // The lock goes with the process, kill -9 included: a new ingest starts.
+  first->Kill(SIGKILL);
+  DaemonProcess* third =
+      Start("lfrecon-ingest", {"--bind", other, "--aggregate", agg_, "--store", store_.string()});
+  EXPECT_TRUE(Ping(other));
+  EXPECT_TRUE(third->Running());
+}
+
 // kill -9 of the aggregator, one stored dense map left empty (what a power
 // loss leaves of an unsynced file): the job FAILED on restart. That view is
 // done again and the job completes.
