@@ -154,6 +154,38 @@ std::unique_ptr<FileLock> LockStoreForIngest(const JobStore& store) {
   }
 }
 
+bool IsTempFileName(const std::string& name) {
+  const auto at = name.rfind(".tmp");
+  if (at == std::string::npos || at == 0) return false;
+  const std::string tail = name.substr(at + 4);  // "<pid>_<n>"
+  const auto underscore = tail.find('_');
+  if (underscore == std::string::npos || underscore == 0 || underscore + 1 == tail.size()) return false;
+  for (std::size_t i = 0; i < tail.size(); ++i)
+    if (i != underscore && !std::isdigit(static_cast<unsigned char>(tail[i]))) return false;
+  return true;
+}
+
+int RemoveIngestTempFiles(const JobStore& store) {
+  int removed = 0;
+  std::error_code ec;
+  auto sweep = [&](const fs::path& dir, bool any) {
+    std::error_code e2;
+    for (const auto& e : fs::directory_iterator(dir, e2)) {
+      const std::string name = e.path().filename().string();
+      if (!IsTempFileName(name)) continue;
+      const std::string target = name.substr(0, name.rfind(".tmp"));
+      if (!any && target != "manifest.pb" && target != "ingest.done") continue;  // the aggregator's are its own
+      if (fs::remove(e.path(), e2)) ++removed;
+    }
+  };
+  for (const auto& e : fs::directory_iterator(store.root(), ec)) {
+    if (!JobStore::ValidJobId(e.path().filename().string()) || !e.is_directory(ec)) continue;
+    sweep(e.path(), false);
+    sweep(e.path() / "frames", true);
+  }
+  return removed;
+}
+
 JobStore::JobStore(fs::path root) : root_(std::move(root)) { fs::create_directories(root_); }
 
 bool JobStore::ValidJobId(const std::string& id) {

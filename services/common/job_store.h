@@ -101,6 +101,15 @@ class FileLock {
 constexpr const char* kIngestLockName = ".ingest.lock";
 std::unique_ptr<FileLock> LockStoreForIngest(const JobStore& store);
 
+// True for a name TempPathFor gives: "<name>.tmp<pid>_<n>".
+bool IsTempFileName(const std::string& name);
+// What a writer killed mid-write (kill -9 between creating its temporary file
+// and renaming it) leaves: removes, in every job of the store, the temporary
+// files of the files ingest writes (manifest.pb, ingest.done, frames/*).
+// Call with the ingest lock held (no other ingest is writing them). Returns
+// how many were removed.
+int RemoveIngestTempFiles(const JobStore& store);
+
 // Conversions between the messages and the library types (all validate sizes
 // and finiteness and throw InputError with `what` naming the source).
 pb::Camera CameraToProto(const PinholeView& view, const std::string& name);

@@ -140,6 +140,8 @@ int Serve(const IngestOptions& o) {
   JobStore store(o.store);
   // One ingest per store: a second would spool the same unfinished jobs again.
   const auto store_lock = LockStoreForIngest(store);
+  if (const int n = RemoveIngestTempFiles(store))  // a killed ingest's half-written files
+    spdlog::info("ingest: removed {} temporary files a previous ingest left in the store", n);
   RouterServer server(context, o.endpoint, o.max_message_bytes, o.security);
   RequestClient agg(context, o.aggregate, o.max_message_bytes, o.to_aggregate);
   // One thread per job being spooled; finished ones are joined as they end.

@@ -510,6 +510,14 @@ TEST_F(FaultsTest, IngestKilledMidJobResumesOnRestart) {
   const auto written = fs::last_write_time(frame0);
   const int before = static_cast<int>(Status(job).frames_spooled());
   EXPECT_LT(before, g_ref.views);
+  // What a kill during a frame's write leaves (it landed there in some runs:
+  // the test then failed on the temporary file): half a frame under its
+  // temporary name, never renamed. Planted, so every run has one; the
+  // restarted ingest (holding the store's ingest lock) removes them.
+  const fs::path stale_frame = JobStore(store_).FramePath(job, g_ref.views - 1).string() + ".tmp999999_0";
+  const fs::path stale_manifest = store_ / job / "manifest.pb.tmp999999_1";
+  std::ofstream(stale_frame) << "half a frame";
+  std::ofstream(stale_manifest) << "half a manifest";
   StartIngest();
   s = WaitEnded(job);
   EXPECT_EQ(s.state(), pb::STATE_DONE) << s.message();
