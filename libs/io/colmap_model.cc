@@ -13,6 +13,7 @@
 #include <sstream>
 #include <stdexcept>
 
+#include "io/input_text.h"
 #include "util/error.h"
 
 namespace lfrecon {
@@ -24,7 +25,7 @@ namespace {
 // Shared validation
 
 std::string ImageLabel(std::uint32_t id, const std::string& name) {
-  return "image " + std::to_string(id) + (name.empty() ? std::string() : " (" + name + ")");
+  return "image " + std::to_string(id) + (name.empty() ? std::string() : " (" + InputToken(name) + ")");
 }
 
 // COLMAP normalises quaternions on read; a zero or non-finite one cannot be.
@@ -135,14 +136,14 @@ class TextLines {
   double Double(const std::string& token, const char* what) const {
     double v = 0;
     if (!ParseDouble(token, &v))
-      throw InputError(path_, Field(), std::string(what) + ": '" + token + "' is not a number");
+      throw InputError(path_, Field(), std::string(what) + ": " + InputToken(token) + " is not a number");
     return v;
   }
   std::uint64_t Uint(const std::string& token, std::uint64_t max_value, const char* what) const {
     std::uint64_t v = 0;
     if (!ParseUint(token, max_value, &v))
       throw InputError(path_, Field(),
-                       std::string(what) + ": '" + token + "' is not a valid unsigned integer");
+                       std::string(what) + ": " + InputToken(token) + " is not a valid unsigned integer");
     return v;
   }
 
@@ -159,14 +160,16 @@ void ReadCamerasText(const fs::path& path, ColmapModel* model) {
     const std::vector<std::string> tok = Split(line);
     if (tok.size() < 4)
       throw InputError(lines.path(), lines.Field(),
-                       "expected CAMERA_ID MODEL WIDTH HEIGHT PARAMS[], got '" + line + "'");
+                       "expected CAMERA_ID MODEL WIDTH HEIGHT PARAMS[], got " + std::to_string(tok.size()) +
+                           " fields");
     const auto id = static_cast<std::uint32_t>(
         lines.Uint(tok[0], std::numeric_limits<std::uint32_t>::max(), "CAMERA_ID"));
     Camera camera;
     try {
       camera.model = CameraModelFromName(tok[1]);
-    } catch (const std::invalid_argument& e) {
-      throw InputError(lines.path(), lines.Field(), "camera " + std::to_string(id) + ": " + e.what());
+    } catch (const std::invalid_argument&) {
+      throw InputError(lines.path(), lines.Field(),
+                       "camera " + std::to_string(id) + ": unsupported camera model " + InputToken(tok[1]));
     }
     camera.width = static_cast<int>(lines.Uint(tok[2], std::numeric_limits<int>::max(), "WIDTH"));
     camera.height = static_cast<int>(lines.Uint(tok[3], std::numeric_limits<int>::max(), "HEIGHT"));
@@ -214,7 +217,7 @@ void ReadImagesText(const fs::path& path, ColmapModel* model) {
     name = Trim(name);
     if (tok[8].empty() || name.empty())
       throw InputError(lines.path(), field,
-                       "expected IMAGE_ID QW QX QY QZ TX TY TZ CAMERA_ID NAME, got '" + line + "'");
+                       "expected IMAGE_ID QW QX QY QZ TX TY TZ CAMERA_ID NAME (fields missing)");
     ColmapImage image;
     image.name = name;
     image.image_id =

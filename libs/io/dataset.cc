@@ -16,6 +16,7 @@
 
 #include "geometry/undistorter.h"
 #include "io/colmap_model.h"
+#include "io/input_text.h"
 #include "io/json_file.h"
 #include "io/transforms_json.h"
 #include "util/error.h"
@@ -327,7 +328,7 @@ Dataset Dataset::Open(const DatasetOptions& options) {
           name = ResolveTransformsImage(frames[i].file_path, base, ds.images_dir_);
           if (name.empty())
             throw InputError(pose_file, "frames[" + std::to_string(i) + "].file_path",
-                             "'" + frames[i].file_path + "' matches no image in " + ds.images_dir_.string());
+                             InputToken(frames[i].file_path) + " matches no image in " + ds.images_dir_.string());
         }
         PoseEntry e{name, frames[i].camera, frames[i].cam_from_world, {}};
         if (!frames[i].mask_path.empty()) {
@@ -337,11 +338,11 @@ Dataset Dataset::Open(const DatasetOptions& options) {
           for (const fs::path& part : mp) escapes = escapes || part == "..";
           if (escapes)
             throw InputError(pose_file, "frames[" + std::to_string(i) + "].mask_path",
-                             "'" + frames[i].mask_path + "' leaves the dataset folder (absolute or '..')");
+                             InputToken(frames[i].mask_path) + " leaves the dataset folder (absolute or '..')");
           e.mask_path = base / mp;
           if (!IsFile(e.mask_path))
             throw InputError(pose_file, "frames[" + std::to_string(i) + "].mask_path",
-                             "'" + frames[i].mask_path + "' does not exist");
+                             InputToken(frames[i].mask_path) + " does not exist");
         }
         entries.push_back(std::move(e));
       }
@@ -366,7 +367,7 @@ Dataset Dataset::Open(const DatasetOptions& options) {
             [](const PoseEntry& a, const PoseEntry& b) { return NaturalNameLess(a.name, b.name); });
   for (size_t i = 1; i < entries.size(); ++i)
     if (entries[i].name == entries[i - 1].name)
-      throw InputError(pose_file, "'" + entries[i].name + "' has two poses");
+      throw InputError(pose_file, InputToken(entries[i].name) + " has two poses");
 
   // An image name is a path *inside* the image folder: absolute names and
   // ".." components would let a pose file point the reader anywhere.
@@ -375,7 +376,7 @@ Dataset Dataset::Open(const DatasetOptions& options) {
     bool escapes = n.is_absolute() || n.has_root_name() || n.has_root_directory();
     for (const fs::path& part : n) escapes = escapes || part == "..";
     if (escapes)
-      throw InputError(pose_file, "image name '" + e.name + "' leaves the image folder (absolute or '..')");
+      throw InputError(pose_file, "image name " + InputToken(e.name) + " leaves the image folder (absolute or '..')");
   }
 
   if (ds.video_path_.empty()) {

@@ -28,8 +28,18 @@ nlohmann::json ReadJsonFile(const std::filesystem::path& path, int max_depth) {
     return json::parse(in, limit);
   } catch (const TooDeep&) {
     throw InputError(file, "JSON nested deeper than " + std::to_string(max_depth) + " levels");
-  } catch (const json::exception& e) {
-    throw InputError(file, std::string("not valid JSON: ") + e.what());
+  } catch (const json::parse_error& e) {
+    // nlohmann's message ends with the bytes it read ("; last read: '...'"):
+    // not echoed (input_text.h); the position and the kind of error are.
+    std::string what = e.what();
+    const auto last = what.find("; last read:");
+    if (last != std::string::npos) what.resize(last);
+    throw InputError(file, "byte " + std::to_string(e.byte), "not valid JSON: " + what);
+  } catch (const json::exception& e) {  // e.g. a number out of range: its message quotes the number
+    std::string what = e.what();
+    const auto quote = what.find('\'');
+    if (quote != std::string::npos) what.resize(quote);
+    throw InputError(file, std::string("not valid JSON: ") + what);
   }
 }
 

@@ -8,6 +8,7 @@
 #include <nlohmann/json.hpp>
 #include <optional>
 
+#include "io/input_text.h"
 #include "io/json_file.h"
 #include "util/error.h"
 
@@ -32,7 +33,7 @@ struct IntrinsicsKeys {
   std::optional<double> Number(const char* key) const {
     const json* v = Find(key);
     if (!v || v->is_null()) return std::nullopt;
-    if (!v->is_number()) throw InputError(file, field + key, "must be a number, got " + v->dump());
+    if (!v->is_number()) throw InputError(file, field + key, std::string("must be a number, got a ") + v->type_name());
     const double d = v->get<double>();
     if (!std::isfinite(d)) throw InputError(file, field + key, "is not finite");
     return d;
@@ -74,10 +75,12 @@ Camera ParseCamera(const IntrinsicsKeys& keys, const std::optional<std::pair<int
   const double cy = keys.Number("cy").value_or(0.5 * h);
   bool fisheye = false;
   if (const json* m = keys.Find("camera_model")) {
-    const std::string name = m->is_string() ? m->get<std::string>() : m->dump();
+    if (!m->is_string())
+      throw InputError(keys.file, keys.field + "camera_model", std::string("must be a string, got a ") + m->type_name());
+    const std::string name = m->get<std::string>();
     if (name != "OPENCV" && name != "PINHOLE" && name != "SIMPLE_PINHOLE" && name != "OPENCV_FISHEYE")
       throw InputError(keys.file, keys.field + "camera_model",
-                       "unsupported camera model '" + name + "' (supported: PINHOLE, OPENCV, OPENCV_FISHEYE)");
+                       "unsupported camera model " + InputToken(name) + " (supported: PINHOLE, OPENCV, OPENCV_FISHEYE)");
     fisheye = name == "OPENCV_FISHEYE";
   }
   const double k1 = keys.Number("k1").value_or(0), k2 = keys.Number("k2").value_or(0);
@@ -117,7 +120,7 @@ Rigid3d ParsePose(const json& frame, const std::string& file, const std::string&
     for (int c = 0; c < 4; ++c) {
       if (!m[r][c].is_number())
         throw InputError(file, field + "transform_matrix",
-                         "row " + std::to_string(r) + " holds a non-number " + m[r][c].dump());
+                         "row " + std::to_string(r) + " holds a non-number (a " + m[r][c].type_name() + ")");
       c2w(r, c) = m[r][c].get<double>();
     }
   }
@@ -203,7 +206,7 @@ std::vector<TransformsFrame> ReadTransformsJson(const fs::path& path, const Tran
       throw InputError(file, field + ".file_path", "missing or not a string");
     TransformsFrame frame;
     frame.file_path = f["file_path"].get<std::string>();
-    field += " (" + frame.file_path + ").";
+    field += " (" + InputToken(frame.file_path) + ").";
     if (f.contains("mask_path")) {
       if (!f["mask_path"].is_string()) throw InputError(file, field + "mask_path", "must be a string");
       frame.mask_path = f["mask_path"].get<std::string>();

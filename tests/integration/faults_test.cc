@@ -229,6 +229,45 @@ TEST_F(FaultsTest, IngestReadsOnlyUnderItsDataRoots) {
   EXPECT_EQ(inside.first, 0) << inside.second;
 }
 
+// A transforms.json with a secret in a bad value (or in a string that breaks
+// the JSON), a COLMAP cameras.txt with one in a parameter: the submission is
+// refused with an error naming the file and the field, byte or line, and the
+// reply does not repeat the secret (it did: the value's dump, the JSON
+// parser's "last read" bytes, the COLMAP token and line).
+TEST_F(FaultsTest, IngestErrorRepliesDoNotEchoTheFile) {
+  StartAggregator();
+  StartIngest();
+  const std::string secret = "sk_live_SECRET_4eC39HqLyjWDarjtT1zdp7dc";
+  const fs::path ds = tmp_->path() / "leaky";
+  fs::copy(g_ref.dataset, ds, fs::copy_options::recursive);
+  const std::string good = ReadFileBytes(ds / "transforms.json");
+  const auto at = good.find("\"fl_x\":");
+  ASSERT_NE(at, std::string::npos);
+  const auto end = good.find(',', at);
+  const std::string bad_value = good.substr(0, at) + "\"fl_x\": \"" + secret + "\"" + good.substr(end);
+  const std::string bad_json = good.substr(0, at) + "\"fl_x\": \"" + secret + "\n\"" + good.substr(end);
+  auto expect_refused = [&](const std::string& file, const std::string& needle) {
+    SCOPED_TRACE(needle);
+    const auto r = lfrecon::testing::RunShell(kBin + "lfrecon -q submit --ingest " + ing_ + " --dataset " + ds.string());
+    EXPECT_EQ(r.code, 1) << r.output;
+    EXPECT_NE(r.output.find(file), std::string::npos) << r.output;
+    EXPECT_NE(r.output.find(needle), std::string::npos) << r.output;
+    EXPECT_EQ(r.output.find("SECRET"), std::string::npos) << r.output;
+  };
+  // The COLMAP model comes first: without it, transforms.json is read.
+  fs::rename(ds / "sparse", tmp_->path() / "sparse");
+  std::ofstream(ds / "transforms.json", std::ios::binary) << bad_value;
+  expect_refused("transforms.json", "fl_x");
+  std::ofstream(ds / "transforms.json", std::ios::binary) << bad_json;
+  expect_refused("transforms.json", "not valid JSON");
+  fs::rename(tmp_->path() / "sparse", ds / "sparse");
+  std::ofstream(ds / "sparse" / "cameras.txt") << "1 PINHOLE 96 54 " << secret << " 92 48 27\n";
+  expect_refused("cameras.txt", "line 1");
+  std::ofstream(ds / "sparse" / "cameras.txt") << "1 " << secret << "\n";
+  expect_refused("cameras.txt", "got 2 fields");
+  EXPECT_TRUE(procs_[1]->Running());
+}
+
 TEST_F(FaultsTest, ResultMustMatchItsLease) {
   StartAggregator();
   const std::string job = CreateJobWithFrames(pb::JobSpec());

@@ -188,5 +188,54 @@ TEST(TransformsJsonBadInput, DeepNestingIsAnInputErrorNotACrash) {
   ExpectInputError([&] { ReadJsonFile(p); }, {"transforms.json", "nested deeper than 64"});
 }
 
+// Error messages reach clients (the ingest daemon's replies, job status): they
+// name the file and the field or position, never what the file holds beyond a
+// short printable token. A secret pasted into a bad value is not repeated
+// (it was: nlohmann's dump of the value, its "last read" bytes, the name).
+TEST(TransformsJsonBadInput, ErrorsDoNotEchoTheFilesContents) {
+  TempDir tmp;
+  const fs::path p = tmp.path() / "transforms.json";
+  const std::string secret = "sk_live_SECRET_4eC39HqLyjWDarjtT1zdp7dc";
+  const std::string matrix = R"("transform_matrix": [[1,0,0,0],[0,1,0,0],[0,0,1,0],[0,0,0,1]])";
+  auto expect_clean = [&](const std::string& text, const std::vector<std::string>& needles) {
+    SCOPED_TRACE(text.substr(0, 80));
+    std::ofstream(p, std::ios::binary) << text;
+    std::vector<std::string> all = {"transforms.json"};
+    all.insert(all.end(), needles.begin(), needles.end());
+    ExpectInputError([&] { ReadTransformsJson(p); }, all);
+    try {
+      ReadTransformsJson(p);
+    } catch (const InputError& e) {
+      const std::string what = e.what();
+      EXPECT_EQ(what.find("SECRET"), std::string::npos) << what;
+      EXPECT_LT(what.size(), p.string().size() + 300) << what;  // no copy of the file
+      for (char c : what) EXPECT_TRUE(c >= 0x20 && c < 0x7f) << what;
+    }
+  };
+  // A string (or an object) where a number belongs: its type, not its value.
+  expect_clean(R"({"w": 10, "h": 10, "fl_x": ")" + secret + R"(", "frames": [{"file_path": "x.png", )" + matrix +
+                   "}]}",
+               {"fl_x", "must be a number", "string"});
+  expect_clean(R"({"w": 10, "h": 10, "fl_x": {"key": ")" + secret + R"("}, "frames": [{"file_path": "x.png", )" +
+                   matrix + "}]}",
+               {"fl_x", "object"});
+  expect_clean(R"({"w": 10, "h": 10, "fl_x": 10, "frames": [{"file_path": "x.png",
+      "transform_matrix": [[1,0,0,0],[0,1,0,")" + secret + R"("],[0,0,1,0],[0,0,0,1]]}]})",
+               {"x.png", "non-number", "string"});
+  // A camera model name: quoted only when short and printable.
+  expect_clean(R"({"w": 10, "h": 10, "fl_x": 10, "camera_model": ")" + secret + R"(", "frames": [{"file_path": "x.png", )" +
+                   matrix + "}]}",
+               {"camera_model", "unsupported camera model", "a text of 39 bytes"});
+  expect_clean(R"({"w": 10, "h": 10, "fl_x": 10, "camera_model": "FISH\u0001EYE", "frames": [{"file_path": "x.png", )" +
+                   matrix + "}]}",
+               {"camera_model", "'FISH?EYE'"});
+  // Not JSON: the position, not the bytes read (a raw newline inside a string).
+  expect_clean("{\"w\": 10, \"fl_x\": \"" + secret + "\n\", \"frames\": []}", {"byte", "not valid JSON"});
+  expect_clean("{\"w\": " + secret + "}", {"byte", "not valid JSON", "invalid literal"});
+  // An image name that is the secret: not repeated in the frame's field.
+  expect_clean(R"({"w": 10, "h": 10, "fl_x": 10, "frames": [{"file_path": ")" + secret + R"("}]})",
+               {"frames[0]", "a text of 39 bytes", "transform_matrix"});
+}
+
 }  // namespace
 }  // namespace lfrecon
