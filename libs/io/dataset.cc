@@ -16,7 +16,6 @@
 
 #include "geometry/undistorter.h"
 #include "io/colmap_model.h"
-#include "io/input_text.h"
 #include "io/json_file.h"
 #include "io/transforms_json.h"
 #include "util/error.h"
@@ -80,6 +79,14 @@ std::string ResolveTransformsImage(const std::string& file_path, const fs::path&
   return "";
 }
 
+// --max-image-size: area averaging, as the camera was scaled (Camera::Scaled).
+cv::Mat Downscale(const cv::Mat& image, const Camera& camera) {
+  if (camera.width == image.cols && camera.height == image.rows) return image;
+  cv::Mat small;
+  cv::resize(image, small, cv::Size(camera.width, camera.height), 0, 0, cv::INTER_AREA);
+  return small;
+}
+
 // Reads frames through an image list or a video and hands out undistorted,
 // size-checked frames in the order of the dataset's views.
 class DatasetFrameSource : public FrameSource {
@@ -140,13 +147,7 @@ class DatasetFrameSource : public FrameSource {
     }
     frame->index = index;
     frame->name = view.name;
-    if (camera.width != frame->image.cols || camera.height != frame->image.rows) {
-      // --max-image-size: area averaging, as the camera was scaled (Camera::Scaled).
-      cv::Mat small;
-      cv::resize(frame->image, small, cv::Size(camera.width, camera.height), 0, 0, cv::INTER_AREA);
-      frame->image = small;
-    }
-    frame->image = UndistorterFor(camera).Apply(frame->image);
+    frame->image = UndistorterFor(camera).Apply(Downscale(frame->image, camera));
   }
 
   const Undistorter& UndistorterFor(const Camera& camera) {
@@ -209,6 +210,11 @@ fs::path FindMaskFile(const fs::path& dir, const std::string& name) {
 }
 
 }  // namespace
+
+cv::Mat PrepareFrame(const cv::Mat& image, const Camera& camera) {
+  const cv::Mat scaled = Downscale(image, camera);
+  return camera.HasDistortion() ? Undistorter(camera).Apply(scaled) : scaled;
+}
 
 void DatasetOptions::Check() const {
   if (!images_dir.empty() && !video_path.empty())
@@ -328,7 +334,7 @@ Dataset Dataset::Open(const DatasetOptions& options) {
           name = ResolveTransformsImage(frames[i].file_path, base, ds.images_dir_);
           if (name.empty())
             throw InputError(pose_file, "frames[" + std::to_string(i) + "].file_path",
-                             InputToken(frames[i].file_path) + " matches no image in " + ds.images_dir_.string());
+                             "'" + frames[i].file_path + "' matches no image in " + ds.images_dir_.string());
         }
         PoseEntry e{name, frames[i].camera, frames[i].cam_from_world, {}};
         if (!frames[i].mask_path.empty()) {
@@ -338,11 +344,11 @@ Dataset Dataset::Open(const DatasetOptions& options) {
           for (const fs::path& part : mp) escapes = escapes || part == "..";
           if (escapes)
             throw InputError(pose_file, "frames[" + std::to_string(i) + "].mask_path",
-                             InputToken(frames[i].mask_path) + " leaves the dataset folder (absolute or '..')");
+                             "'" + frames[i].mask_path + "' leaves the dataset folder (absolute or '..')");
           e.mask_path = base / mp;
           if (!IsFile(e.mask_path))
             throw InputError(pose_file, "frames[" + std::to_string(i) + "].mask_path",
-                             InputToken(frames[i].mask_path) + " does not exist");
+                             "'" + frames[i].mask_path + "' does not exist");
         }
         entries.push_back(std::move(e));
       }
@@ -367,7 +373,7 @@ Dataset Dataset::Open(const DatasetOptions& options) {
             [](const PoseEntry& a, const PoseEntry& b) { return NaturalNameLess(a.name, b.name); });
   for (size_t i = 1; i < entries.size(); ++i)
     if (entries[i].name == entries[i - 1].name)
-      throw InputError(pose_file, InputToken(entries[i].name) + " has two poses");
+      throw InputError(pose_file, "'" + entries[i].name + "' has two poses");
 
   // An image name is a path *inside* the image folder: absolute names and
   // ".." components would let a pose file point the reader anywhere.
@@ -376,7 +382,7 @@ Dataset Dataset::Open(const DatasetOptions& options) {
     bool escapes = n.is_absolute() || n.has_root_name() || n.has_root_directory();
     for (const fs::path& part : n) escapes = escapes || part == "..";
     if (escapes)
-      throw InputError(pose_file, "image name " + InputToken(e.name) + " leaves the image folder (absolute or '..')");
+      throw InputError(pose_file, "image name '" + e.name + "' leaves the image folder (absolute or '..')");
   }
 
   if (ds.video_path_.empty()) {

@@ -57,6 +57,13 @@ struct DatasetView {
 // Each side is rounded to the nearest pixel, at least 1.
 std::pair<int, int> ScaledImageSize(int width, int height, int max_size);
 
+// A frame decoded at its stored size -> as Dataset::OpenFrames hands it out:
+// downscaled to `camera`'s size when it differs (cv::INTER_AREA, as the camera
+// was scaled) and undistorted (Undistorter of `camera`; none without
+// distortion). The job store decodes its frames through this too, so the
+// service sees the pixels `lfrecon run` sees.
+cv::Mat PrepareFrame(const cv::Mat& image, const Camera& camera);
+
 class Dataset {
  public:
   static Dataset Open(const DatasetOptions& options);

@@ -174,6 +174,59 @@ std::optional<ImageHeader> ReadImageHeader(const std::string& bytes) {
   return ReadJpegHeader(bytes);
 }
 
+namespace {
+
+void CheckImageSize(const std::string& file, int width, int height, const char* what, std::optional<cv::Size> expect) {
+  if (expect && (width != expect->width || height != expect->height))
+    throw InputError(file, std::string(what) + " is " + std::to_string(width) + "x" + std::to_string(height) +
+                               " but its camera is " + std::to_string(expect->width) + "x" +
+                               std::to_string(expect->height));
+  if (static_cast<std::int64_t>(width) * height > kMaxImagePixels)
+    throw InputError(file, std::string(what) + " is " + std::to_string(width) + "x" + std::to_string(height) +
+                               ": more than the " + std::to_string(kMaxImagePixels) + " pixels a frame may have");
+}
+
+// The header check before decoding (PNG/JPEG): size, JPEG completeness.
+void CheckImageHeader(const std::string& file, const ImageHeader& header, std::optional<cv::Size> expect) {
+  if (!header.complete)
+    throw InputError(file, "JPEG data ends before its end-of-image marker (truncated or corrupt file)");
+  if (header.width > 0 || header.format == "png") CheckImageSize(file, header.width, header.height, "image header", expect);
+}
+
+// EXIF orientation is ignored, as COLMAP does: its Bitmap::Read opens images
+// with OpenImageIO's "oiio:reorient" = 0 (src/colmap/sensor/bitmap.cc; FreeImage
+// in older versions did not rotate either), so its cameras and poses describe
+// the pixels as stored. IMREAD_UNCHANGED (keeps 16-bit data) already skips
+// OpenCV's EXIF rotation; IMREAD_IGNORE_ORIENTATION says so explicitly.
+constexpr int kImreadFlags = cv::IMREAD_UNCHANGED | cv::IMREAD_IGNORE_ORIENTATION;
+
+cv::Mat FinishDecoded(const std::string& file, const cv::Mat& raw, std::optional<cv::Size> expect) {
+  if (raw.empty()) throw InputError(file, "image cannot be read (corrupt or unsupported format)");
+  CheckImageSize(file, raw.cols, raw.rows, "image", expect);
+  try {
+    return ToFloatBgr(raw);
+  } catch (const std::invalid_argument& e) {
+    throw InputError(file, e.what());
+  }
+}
+
+}  // namespace
+
+cv::Mat DecodeImageFloat(const std::string& bytes, const std::string& what, std::optional<cv::Size> expect) {
+  const auto header = ReadImageHeader(bytes);
+  if (!header) throw InputError(what, "not PNG or JPEG data");
+  if (bytes.size() > static_cast<std::size_t>(std::numeric_limits<int>::max()))
+    throw InputError(what, "image data larger than 2 GiB");
+  CheckImageHeader(what, *header, expect);
+  cv::Mat raw;
+  try {
+    raw = cv::imdecode(cv::Mat(1, static_cast<int>(bytes.size()), CV_8U, const_cast<char*>(bytes.data())), kImreadFlags);
+  } catch (const cv::Exception& e) {
+    throw InputError(what, std::string("image cannot be decoded: ") + e.what());
+  }
+  return FinishDecoded(what, raw, expect);
+}
+
 cv::Mat ReadImageFloat(const fs::path& path, std::optional<cv::Size> expect) {
   const std::string file = path.string();
   std::error_code ec;
@@ -188,46 +241,16 @@ cv::Mat ReadImageFloat(const fs::path& path, std::optional<cv::Size> expect) {
     if (bytes.size() > static_cast<std::size_t>(std::numeric_limits<int>::max()))
       throw InputError(file, "image file larger than 2 GiB");
   }
-  auto check_size = [&](int width, int height, const char* what) {
-    if (expect && (width != expect->width || height != expect->height))
-      throw InputError(file, std::string(what) + " is " + std::to_string(width) + "x" + std::to_string(height) +
-                                 " but its camera is " + std::to_string(expect->width) + "x" +
-                                 std::to_string(expect->height));
-    if (static_cast<std::int64_t>(width) * height > kMaxImagePixels)
-      throw InputError(file, std::string(what) + " is " + std::to_string(width) + "x" + std::to_string(height) +
-                                 ": more than the " + std::to_string(kMaxImagePixels) + " pixels a frame may have");
-  };
-  const auto header = ReadImageHeader(bytes);
-  if (header) {
-    if (!header->complete)
-      throw InputError(file, "JPEG data ends before its end-of-image marker (truncated or corrupt file)");
-    if (header->width > 0 || header->format == "png") check_size(header->width, header->height, "image header");
-  }
+  // PNG/JPEG from the bytes read; other formats from the file (some OpenCV decoders read files only).
+  if (ReadImageHeader(bytes)) return DecodeImageFloat(bytes, file, expect);
+  bytes = std::string();
   cv::Mat raw;
   try {
-    // EXIF orientation is ignored, as COLMAP does: its Bitmap::Read opens images
-    // with OpenImageIO's "oiio:reorient" = 0 (src/colmap/sensor/bitmap.cc; FreeImage
-    // in older versions did not rotate either), so its cameras and poses describe
-    // the pixels as stored. IMREAD_UNCHANGED (keeps 16-bit data) already skips
-    // OpenCV's EXIF rotation; IMREAD_IGNORE_ORIENTATION says so explicitly.
-    // PNG/JPEG from the bytes read; other formats from the file (some OpenCV
-    // decoders read files only).
-    const int flags = cv::IMREAD_UNCHANGED | cv::IMREAD_IGNORE_ORIENTATION;
-    if (header)
-      raw = cv::imdecode(cv::Mat(1, static_cast<int>(bytes.size()), CV_8U, bytes.data()), flags);
-    else
-      raw = cv::imread(file, flags);
+    raw = cv::imread(file, kImreadFlags);
   } catch (const cv::Exception& e) {
     throw InputError(file, std::string("image cannot be decoded: ") + e.what());
   }
-  if (raw.empty()) throw InputError(file, "image cannot be read (corrupt or unsupported format)");
-  bytes = std::string();
-  check_size(raw.cols, raw.rows, "image");
-  try {
-    return ToFloatBgr(raw);
-  } catch (const std::invalid_argument& e) {
-    throw InputError(path.string(), e.what());
-  }
+  return FinishDecoded(file, raw, expect);
 }
 
 void WriteImageFloat(const fs::path& path, const cv::Mat& image, int jpeg_quality) {

@@ -56,6 +56,12 @@ std::optional<ImageHeader> ReadImageHeader(const std::string& bytes);
 // Frames larger than this are refused before they are decoded (~1.2 GB as floats).
 constexpr std::int64_t kMaxImagePixels = std::int64_t{100} << 20;
 
+// Decodes PNG or JPEG bytes (ReadImageHeader recognises them) as ReadImageFloat
+// does a file of them: the header checked before any pixel is decoded (the size
+// against `expect` when given, and kMaxImagePixels; a truncated JPEG refused),
+// IMREAD_UNCHANGED without EXIF rotation, then ToFloatBgr. Throws InputError
+// naming `what` (also for bytes of another format).
+cv::Mat DecodeImageFloat(const std::string& bytes, const std::string& what, std::optional<cv::Size> expect = std::nullopt);
 // Reads one image file as CV_32FC3 BGR in [0, 1]; throws InputError naming it.
 // PNG and JPEG headers are checked before decoding: the size against `expect`
 // (the frame's camera, when given) and kMaxImagePixels; a JPEG without its

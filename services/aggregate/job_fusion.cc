@@ -68,7 +68,9 @@ std::unique_ptr<Aggregator::Job> Aggregator::LoadJob(const std::string& id) {
   for (int k = 0; k < n; ++k) {
     const std::uintmax_t pixels = static_cast<std::uintmax_t>(job->geo.views[k].width) * job->geo.views[k].height;
     if (store_.HasFrame(id, k)) {
-      if (intact(store_.FramePath(id, k), pixels * 12)) job->frame_ok[k] = 1, ++job->frames_spooled;
+      // Frames are compact (encoded images, common/job_store.h): any length may be whole; one that
+      // does not decode fails its tasks, which name the file.
+      if (intact(store_.FramePath(id, k), 1)) job->frame_ok[k] = 1, ++job->frames_spooled;
       else if (bad_frame < 0) bad_frame = k;
     }
     if (store_.HasMap(id, pb::MAP_SPARSE, k) && intact(store_.MapPath(id, pb::MAP_SPARSE, k), pixels * 4))

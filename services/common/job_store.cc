@@ -10,8 +10,10 @@
 #include <cstring>
 #include <fstream>
 #include <random>
+#include <opencv2/imgcodecs.hpp>
 #include <sstream>
 
+#include "io/frame_source.h"
 #include "util/error.h"
 
 namespace lfrecon::svc {
@@ -337,18 +339,84 @@ BoundingBox BoxFromProto(const pb::Box& b, const std::string& what) {
   return box;
 }
 
+namespace {
+
+std::string EncodePng(const cv::Mat& u8, const std::string& what) {
+  std::vector<uchar> buf;
+  try {
+    if (!cv::imencode(".png", u8, buf)) throw InputError(what, "cannot encode the frame as PNG");
+  } catch (const cv::Exception& e) {
+    throw InputError(what, std::string("cannot encode the frame as PNG: ") + e.what());
+  }
+  return std::string(buf.begin(), buf.end());
+}
+
+}  // namespace
+
 pb::Frame FrameToProto(int index, const cv::Mat& image, const pb::Camera& camera) {
   if (image.type() != CV_32FC3) throw std::invalid_argument("frame must be CV_32FC3");
   pb::Frame f;
   f.set_index(index);
   *f.mutable_camera() = camera;
+  const cv::Mat compact = CompactFrame(image);
+  if (compact.depth() == CV_8U) {
+    f.set_encoding("png");
+    f.set_data(EncodePng(compact, "frame " + std::to_string(index)));
+    return f;
+  }
   f.set_encoding("f32-bgr");
   const cv::Mat c = image.isContinuous() ? image : image.clone();
   f.set_data(c.data, c.total() * c.elemSize());
   return f;
 }
 
+pb::SourceCamera SourceCameraToProto(const Camera& camera, int stored_width, int stored_height) {
+  pb::SourceCamera s;
+  s.set_model(CameraModelName(camera.model));
+  s.set_width(static_cast<std::uint32_t>(camera.width));
+  s.set_height(static_cast<std::uint32_t>(camera.height));
+  for (double p : camera.params) s.add_params(p);
+  s.set_stored_width(static_cast<std::uint32_t>(stored_width));
+  s.set_stored_height(static_cast<std::uint32_t>(stored_height));
+  return s;
+}
+
+Camera SourceCameraFromProto(const pb::SourceCamera& s, const std::string& what) {
+  Camera c;
+  try {
+    c.model = CameraModelFromName(s.model());
+  } catch (const std::invalid_argument& e) {
+    throw InputError(what, "source.model", e.what());
+  }
+  auto in_range = [](std::uint32_t v) { return v > 0 && v <= 65536; };
+  if (!in_range(s.width()) || !in_range(s.height()) || !in_range(s.stored_width()) || !in_range(s.stored_height()))
+    throw InputError(what, "source", "sizes must be 1..65536");
+  // A downscale only (--max-image-size): never larger than the stored image.
+  if (s.width() > s.stored_width() || s.height() > s.stored_height())
+    throw InputError(what, "source", "read size larger than the stored image");
+  c.width = static_cast<int>(s.width());
+  c.height = static_cast<int>(s.height());
+  c.params.assign(s.params().begin(), s.params().end());
+  const std::string bad = c.Validate();
+  if (!bad.empty()) throw InputError(what, "source", bad);
+  return c;
+}
+
 cv::Mat FrameFromProto(const pb::Frame& f, int width, int height, const std::string& what) {
+  if (f.encoding() == "png" || f.encoding() == "jpeg") {
+    if (!f.has_source()) return DecodeImageFloat(f.data(), what, cv::Size(width, height));
+    const Camera source = SourceCameraFromProto(f.source(), what);
+    if (source.width != width || source.height != height)
+      throw InputError(what, "source", "read at " + std::to_string(source.width) + "x" + std::to_string(source.height) +
+                                           ", its view is " + std::to_string(width) + "x" + std::to_string(height));
+    const cv::Mat stored = DecodeImageFloat(
+        f.data(), what, cv::Size(static_cast<int>(f.source().stored_width()), static_cast<int>(f.source().stored_height())));
+    try {
+      return PrepareFrame(stored, source);
+    } catch (const std::exception& e) {
+      throw InputError(what, std::string("cannot prepare the frame: ") + e.what());
+    }
+  }
   if (f.encoding() != "f32-bgr") throw InputError(what, "encoding", "unknown frame encoding '" + f.encoding() + "'");
   const std::size_t want = static_cast<std::size_t>(width) * height * 3 * sizeof(float);
   if (f.data().size() != want)
@@ -357,6 +425,70 @@ cv::Mat FrameFromProto(const pb::Frame& f, int width, int height, const std::str
   cv::Mat image(height, width, CV_32FC3);
   std::memcpy(image.data, f.data().data(), want);
   return image;
+}
+
+pb::Frame CompactFrameProto(pb::Frame f, const std::string& what) {
+  if (f.encoding() != "bgr8" && f.encoding() != "f32-bgr") return f;
+  if (f.has_source()) throw InputError(what, "source", "a raw frame is the frame as read: no source camera");
+  const int w = static_cast<int>(f.camera().width()), h = static_cast<int>(f.camera().height());
+  const std::size_t elem = f.encoding() == "bgr8" ? 1 : sizeof(float);
+  if (w <= 0 || h <= 0 || static_cast<std::int64_t>(w) * h > kMaxImagePixels ||
+      f.data().size() != static_cast<std::size_t>(w) * h * 3 * elem)
+    throw InputError(what, "data", std::to_string(f.data().size()) + " bytes for a " + std::to_string(w) + "x" +
+                                       std::to_string(h) + " " + f.encoding() + " frame");
+  if (f.encoding() == "bgr8") {
+    const cv::Mat u8(h, w, CV_8UC3, const_cast<char*>(f.data().data()));
+    f.set_data(EncodePng(u8, what));
+    f.set_encoding("png");
+    return f;
+  }
+  const cv::Mat image(h, w, CV_32FC3, const_cast<char*>(f.data().data()));
+  if (!cv::checkRange(image, true)) throw InputError(what, "data", "non-finite values");
+  const pb::Camera camera = f.camera();
+  return FrameToProto(static_cast<int>(f.index()), image, camera);
+}
+
+// ---- frames of a dataset as the store keeps them -------------------------------------
+
+StoreFrameEncoder::StoreFrameEncoder(const Dataset& dataset) : ds_(dataset) {
+  if (!ds_.video_path().empty()) video_ = std::make_unique<VideoSource>(ds_.video_path());
+}
+
+StoreFrameEncoder::~StoreFrameEncoder() = default;
+
+pb::Frame StoreFrameEncoder::Encode(int k, bool validate) {
+  const DatasetView& view = ds_.views().at(static_cast<std::size_t>(k));
+  pb::Frame f;
+  f.set_index(static_cast<std::uint32_t>(k));
+  *f.mutable_camera() = CameraToProto(ds_.View(k), view.name);
+  const cv::Size stored(view.source_width, view.source_height);
+  if (video_) {
+    const std::string what = ds_.video_path().string();
+    const lfrecon::Frame raw = video_->Read(k);  // sequential reads do not seek
+    if (raw.image.cols != stored.width || raw.image.rows != stored.height)
+      throw InputError(what, "frame " + std::to_string(k),
+                       "image is " + std::to_string(raw.image.cols) + "x" + std::to_string(raw.image.rows) +
+                           " but its camera (" + view.name + ") is " + std::to_string(stored.width) + "x" +
+                           std::to_string(stored.height));
+    const cv::Mat u8 = CompactFrame(raw.image);  // a decoded video frame is 8-bit: exact
+    if (u8.depth() != CV_8U) throw InputError(what, "frame " + std::to_string(k), "not an 8-bit frame");
+    f.set_encoding("png");
+    f.set_data(EncodePng(u8, what + " frame " + std::to_string(k)));
+    *f.mutable_source() = SourceCameraToProto(view.camera, stored.width, stored.height);
+    return f;
+  }
+  const fs::path path = ds_.ImagePath(k);
+  std::string bytes = ReadFileBytes(path);
+  if (const auto header = ReadImageHeader(bytes)) {
+    if (validate) DecodeImageFloat(bytes, path.string(), stored);
+    f.set_encoding(header->format);
+    f.set_data(std::move(bytes));
+    *f.mutable_source() = SourceCameraToProto(view.camera, stored.width, stored.height);
+    return f;
+  }
+  if (!prepared_) prepared_ = ds_.OpenFrames();
+  const pb::Camera camera = f.camera();
+  return FrameToProto(k, prepared_->Read(k).image, camera);
 }
 
 pb::DepthMap DepthMapToProto(const DepthMap& map, int view, pb::MapKind kind) {

@@ -3,7 +3,10 @@
 // can read (one host, or a shared volume). It is the durable state of a job, so
 // any daemon can restart and resume from it:
 //   JOB/manifest.pb          JobManifest (cameras, V, options), written by ingest
-//   JOB/frames/NNNNNN.pb     Frame: the undistorted frame, lossless (ingest)
+//   JOB/frames/NNNNNN.pb     Frame: the image as received (JPEG/PNG bytes as on disk or as pushed,
+//                            a video or raw frame as 8-bit lossless PNG), downscaled and undistorted
+//                            on read (ingest; StoreFrameEncoder, FrameFromProto)
+//   JOB/stream.pb            StreamOpen of a client-pushed job (ingest); manifest.pb follows at its end
 //   JOB/ingest.done          frame count, when ingest has spooled every frame
 //   JOB/sparse/NNNNNN.pb     DepthMap, sparse (§3.1) (aggregator, from depth workers)
 //   JOB/dense/NNNNNN.pb      DepthMap, dense (§4) or filtered (aggregator, from propagate workers)
@@ -116,8 +119,38 @@ pb::Camera CameraToProto(const PinholeView& view, const std::string& name);
 PinholeView CameraFromProto(const pb::Camera& camera, const std::string& what);
 pb::Box BoxToProto(const BoundingBox& box);
 BoundingBox BoxFromProto(const pb::Box& box, const std::string& what);
+// A CV_32FC3 frame as read: 8-bit lossless PNG when it is exactly an 8-bit image
+// (CompactFrame), else "f32-bgr".
 pb::Frame FrameToProto(int index, const cv::Mat& image, const pb::Camera& camera);
+// The frame as read (CV_32FC3 BGR in [0, 1], width x height): decoded (image
+// headers checked against the stored size before decoding), then downscaled and
+// undistorted when the frame has a source camera (PrepareFrame), so the pixels
+// equal what io/Dataset hands `lfrecon run` for the same file.
 cv::Mat FrameFromProto(const pb::Frame& frame, int width, int height, const std::string& what);
+// A client's raw frame ("bgr8", "f32-bgr") as the store keeps it ("png" when
+// 8-bit, "f32-bgr" otherwise); others unchanged. Throws InputError on a size mismatch.
+pb::Frame CompactFrameProto(pb::Frame frame, const std::string& what);
+pb::SourceCamera SourceCameraToProto(const Camera& camera, int stored_width, int stored_height);
+// Throws InputError naming `what` (unknown model, parameter count, sizes).
+Camera SourceCameraFromProto(const pb::SourceCamera& source, const std::string& what);
+
+// The frames of a dataset as the job store keeps them: an image file's bytes
+// as on disk (PNG, JPEG), a video frame as 8-bit lossless PNG, each with its
+// source camera (downscale and undistortion happen on read); images of other
+// formats (TIFF, EXR, BMP) are read through the dataset and stored as
+// FrameToProto does. Used by ingest's submit path and by `lfrecon stream`.
+class StoreFrameEncoder {
+ public:
+  explicit StoreFrameEncoder(const Dataset& dataset);
+  ~StoreFrameEncoder();
+  // Frame k. `validate`: decoded once (a corrupt file throws InputError naming it).
+  pb::Frame Encode(int k, bool validate);
+
+ private:
+  const Dataset& ds_;
+  std::unique_ptr<FrameSource> video_;     // raw video frames, sequential
+  std::unique_ptr<FrameSource> prepared_;  // the dataset's own frames, for other formats
+};
 pb::DepthMap DepthMapToProto(const DepthMap& map, int view, pb::MapKind kind);
 DepthMap DepthMapFromProto(const pb::DepthMap& map, int width, int height, const std::string& what);
 

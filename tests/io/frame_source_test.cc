@@ -10,8 +10,11 @@
 #include <iterator>
 #include <functional>
 #include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
 #include <opencv2/videoio.hpp>
 
+#include "io/depth_map_io.h"
+#include "io/image_header.h"
 #include "util/error.h"
 #include "common/test_util.h"
 
@@ -260,6 +263,134 @@ TEST(ImageHeader, FrameLargerThanItsCameraIsRefusedBeforeDecoding) {
   const long before_decode = PeakRssBytes();
   EXPECT_EQ(ReadImageFloat(tmp.path() / "big.png").size(), cv::Size(4000, 4000));
   if (remeasured && before_decode > 0) EXPECT_GT(PeakRssBytes() - before_decode, 100l << 20);
+}
+
+
+// Little-endian bytes of `v` into `b` at `at`.
+void PutLe(std::string& b, std::size_t at, std::uint32_t v, int n) {
+  for (int i = 0; i < n; ++i) b[at + i] = static_cast<char>((v >> (8 * i)) & 0xff);
+}
+
+// A BMP whose header says width x height (24-bit, uncompressed) followed by a
+// few bytes of pixels: a small file with a huge (lying) header.
+std::string BmpWithHeader(std::uint32_t width, std::uint32_t height) {
+  std::string b(54, '\0');
+  b[0] = 'B';
+  b[1] = 'M';
+  PutLe(b, 2, 54 + 64, 4);  // file size
+  PutLe(b, 10, 54, 4);      // pixel data offset
+  PutLe(b, 14, 40, 4);      // BITMAPINFOHEADER
+  PutLe(b, 18, width, 4);
+  PutLe(b, 22, height, 4);
+  PutLe(b, 26, 1, 2);   // planes
+  PutLe(b, 28, 24, 2);  // bits per pixel
+  return b + std::string(64, '\x7f');
+}
+
+// A little-endian baseline TIFF (8-bit grey, one uncompressed strip) whose
+// directory says width x height, with `data` bytes of pixels.
+std::string TiffWithHeader(std::uint32_t width, std::uint32_t height, std::size_t data) {
+  const std::uint16_t entries = 9;
+  const std::size_t ifd = 8, pixels = ifd + 2 + 12 * entries + 4;
+  std::string b(pixels, '\0');
+  b[0] = b[1] = 'I';
+  PutLe(b, 2, 42, 2);
+  PutLe(b, 4, ifd, 4);
+  PutLe(b, ifd, entries, 2);
+  const std::uint32_t tags[entries][3] = {  // tag, type (3 SHORT, 4 LONG), value
+      {256, 4, width}, {257, 4, height}, {258, 3, 8},  {259, 3, 1},
+      {262, 3, 1},     {273, 4, static_cast<std::uint32_t>(pixels)},
+      {277, 3, 1},     {278, 4, height}, {279, 4, static_cast<std::uint32_t>(data)}};
+  for (int i = 0; i < entries; ++i) {
+    const std::size_t e = ifd + 2 + 12 * i;
+    PutLe(b, e, tags[i][0], 2);
+    PutLe(b, e + 2, tags[i][1], 2);
+    PutLe(b, e + 4, 1, 4);
+    PutLe(b, e + 8, tags[i][2], tags[i][1] == 3 ? 2 : 4);
+  }
+  return b + std::string(data, '\x40');
+}
+
+// Every format imread decodes has its size read from its header and checked
+// before any pixel is decoded (formerly only PNG and JPEG: a 20000x20000 TIFF
+// or BMP was decoded first, 1.2 GB for this BMP). Sizes of real files of each
+// format this OpenCV writes; lying huge headers refused naming the file,
+// without the memory; a format whose header cannot be read refused.
+TEST(ImageHeader, EveryFormatsSizeIsCheckedBeforeDecoding) {
+  TempDir tmp;
+  const cv::Mat image = Pattern(3, 37, 53);
+  cv::Mat grey, floats;
+  cv::cvtColor(image, grey, cv::COLOR_BGR2GRAY);
+  image.convertTo(floats, CV_32FC3, 1.0 / 255);
+  struct Case {
+    const char* name;
+    const cv::Mat* mat;
+    const char* format;
+  };
+  const Case cases[] = {{"a.bmp", &image, "bmp"},  {"a.tif", &image, "tiff"}, {"a.webp", &image, "webp"},
+                        {"a.ppm", &image, "pnm"},  {"a.pgm", &grey, "pnm"},   {"a.pam", &image, "pam"},
+                        {"a.pfm", &floats, "pfm"}, {"a.hdr", &floats, "hdr"}, {"a.ras", &image, "sunras"}};
+  int checked = 0;
+  for (const Case& c : cases) {
+    SCOPED_TRACE(c.name);
+    const fs::path p = tmp.path() / c.name;
+    bool written = false;
+    try {
+      written = cv::imwrite(p.string(), *c.mat);
+    } catch (const cv::Exception&) {
+    }
+    if (!written) {
+      std::printf("%s: this OpenCV cannot write it, not checked\n", c.name);
+      continue;
+    }
+    const auto h = ReadOtherImageHeader(FileBytes(p));
+    ASSERT_TRUE(h.has_value());
+    EXPECT_EQ(h->format, c.format);
+    EXPECT_EQ(h->width, 53);
+    EXPECT_EQ(h->height, 37);
+    EXPECT_EQ(ReadImageFloat(p, cv::Size(53, 37)).size(), cv::Size(53, 37));
+    ExpectInputError([&] { ReadImageFloat(p, cv::Size(64, 48)); }, {c.name, "image header is 53x37", "64x48"});
+    ++checked;
+  }
+  EXPECT_GE(checked, 7);  // Debian's OpenCV writes all of them
+  {  // OpenEXR: through ReadExrHeader
+    const fs::path p = tmp.path() / "a.exr";
+    WriteExr(p, cv::Mat(37, 53, CV_32F, cv::Scalar(0.5)));
+    EXPECT_EQ(ReadImageFloat(p, cv::Size(53, 37)).size(), cv::Size(53, 37));
+    ExpectInputError([&] { ReadImageFloat(p, cv::Size(64, 48)); }, {"a.exr", "53x37", "64x48"});
+  }
+  // Small files whose headers say 20000x20000: refused from the header, before
+  // OpenCV allocates (and fills) the 1.2 GB the BMP would take.
+  std::ofstream(tmp.path() / "huge.bmp", std::ios::binary) << BmpWithHeader(20000, 20000);
+  std::ofstream(tmp.path() / "huge.tif", std::ios::binary) << TiffWithHeader(20000, 20000, 64);
+  EXPECT_EQ(ReadOtherImageHeader(TiffWithHeader(20000, 20000, 64))->width, 20000);
+  const bool measured = ResetPeakRss();
+  const long before = PeakRssBytes();
+  for (const char* name : {"huge.bmp", "huge.tif"}) {
+    SCOPED_TRACE(name);
+    ExpectInputError([&] { ReadImageFloat(tmp.path() / name); }, {name, "20000x20000", "pixels"});
+    ExpectInputError([&] { ReadImageFloat(tmp.path() / name, cv::Size(64, 48)); }, {name, "20000x20000", "64x48"});
+  }
+  if (measured && before > 0) {
+    const long grew = PeakRssBytes() - before;
+    std::printf("peak RSS grew by %.1f MB while refusing the 20000x20000 BMP and TIFF\n", grew / 1e6);
+    EXPECT_LT(grew, 8l << 20);
+  }
+  // A frame source checks them against the cameras the same way.
+  cv::imwrite((tmp.path() / "ok.bmp").string(), Pattern(0, 48, 64));
+  ImageFolderSource source(tmp.path(), {"ok.bmp", "huge.bmp"});
+  source.ExpectSizes({cv::Size(64, 48), cv::Size(64, 48)});
+  Frame frame;
+  ASSERT_TRUE(source.Next(&frame));
+  ExpectInputError([&] { source.Next(&frame); }, {"huge.bmp", "20000x20000", "64x48"});
+  // The real small TIFF of that shape decodes (the built header is valid TIFF).
+  std::ofstream(tmp.path() / "small.tif", std::ios::binary) << TiffWithHeader(16, 8, 16 * 8);
+  EXPECT_EQ(ReadImageFloat(tmp.path() / "small.tif", cv::Size(16, 8)).size(), cv::Size(16, 8));
+  // Formats whose size cannot be read are refused, naming the file.
+  std::ofstream(tmp.path() / "x.gif", std::ios::binary) << "GIF89a\x10\x00\x08\x00" << std::string(32, '\0');
+  ExpectInputError([&] { ReadImageFloat(tmp.path() / "x.gif"); }, {"x.gif", "unrecognised image format"});
+  std::ofstream(tmp.path() / "cut.bmp", std::ios::binary) << BmpWithHeader(16, 8).substr(0, 16);
+  ExpectInputError([&] { ReadImageFloat(tmp.path() / "cut.bmp"); }, {"cut.bmp", "bmp header gives no image size"});
 }
 
 }  // namespace
