@@ -7,6 +7,7 @@
 #include <cmath>
 #include <cstdio>
 #include <fstream>
+#include <iterator>
 #include <limits>
 #include <map>
 #include <nlohmann/json.hpp>
@@ -16,6 +17,8 @@
 
 #include "geometry/undistorter.h"
 #include "io/colmap_model.h"
+#include "io/image_header.h"
+#include "io/input_text.h"
 #include "io/json_file.h"
 #include "io/transforms_json.h"
 #include "util/error.h"
@@ -176,7 +179,10 @@ struct PoseEntry {
 const char* const kTransformsSplits[] = {"transforms_train.json", "transforms_val.json", "transforms_test.json"};
 
 // The size of an image file from its PNG/JPEG header (the first 1 MiB is
-// enough for any JPEG's frame header after its EXIF data), else by decoding it.
+// enough for any JPEG's frame header after its EXIF data), else from its
+// header of another format (image_header.h; read whole: a TIFF's directory
+// may follow its pixels), never by decoding it. InputError naming the file
+// when its format's header gives no size.
 std::optional<std::pair<int, int>> ImageFileSize(const fs::path& path) {
   std::ifstream in(path, std::ios::binary);
   if (!in) return std::nullopt;
@@ -185,9 +191,17 @@ std::optional<std::pair<int, int>> ImageFileSize(const fs::path& path) {
   bytes.resize(static_cast<std::size_t>(in.gcount()));
   if (const auto h = ReadImageHeader(bytes); h && h->width > 0 && h->height > 0)
     return std::make_pair(h->width, h->height);
-  const cv::Mat image = cv::imread(path.string(), cv::IMREAD_UNCHANGED);
-  if (image.empty()) return std::nullopt;
-  return std::make_pair(image.cols, image.rows);
+  in.clear();
+  in.seekg(0);
+  const std::string all((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  if (const auto h = ReadImageHeader(all)) {  // a JPEG whose frame header lies beyond 1 MiB
+    if (h->width > 0 && h->height > 0) return std::make_pair(h->width, h->height);
+    throw InputError(path.string(), "the " + h->format + " header gives no image size");
+  }
+  const auto [width, height] = OtherImageSize(path, all);
+  if (width > std::numeric_limits<int>::max() || height > std::numeric_limits<int>::max())
+    throw InputError(path.string(), "image header says " + std::to_string(width) + "x" + std::to_string(height));
+  return std::make_pair(static_cast<int>(width), static_cast<int>(height));
 }
 
 // PNG with an alpha channel (IHDR colour type 4 or 6).
@@ -334,7 +348,7 @@ Dataset Dataset::Open(const DatasetOptions& options) {
           name = ResolveTransformsImage(frames[i].file_path, base, ds.images_dir_);
           if (name.empty())
             throw InputError(pose_file, "frames[" + std::to_string(i) + "].file_path",
-                             "'" + frames[i].file_path + "' matches no image in " + ds.images_dir_.string());
+                             InputToken(frames[i].file_path) + " matches no image in " + ds.images_dir_.string());
         }
         PoseEntry e{name, frames[i].camera, frames[i].cam_from_world, {}};
         if (!frames[i].mask_path.empty()) {
@@ -344,11 +358,11 @@ Dataset Dataset::Open(const DatasetOptions& options) {
           for (const fs::path& part : mp) escapes = escapes || part == "..";
           if (escapes)
             throw InputError(pose_file, "frames[" + std::to_string(i) + "].mask_path",
-                             "'" + frames[i].mask_path + "' leaves the dataset folder (absolute or '..')");
+                             InputToken(frames[i].mask_path) + " leaves the dataset folder (absolute or '..')");
           e.mask_path = base / mp;
           if (!IsFile(e.mask_path))
             throw InputError(pose_file, "frames[" + std::to_string(i) + "].mask_path",
-                             "'" + frames[i].mask_path + "' does not exist");
+                             InputToken(frames[i].mask_path) + " does not exist");
         }
         entries.push_back(std::move(e));
       }
@@ -373,7 +387,7 @@ Dataset Dataset::Open(const DatasetOptions& options) {
             [](const PoseEntry& a, const PoseEntry& b) { return NaturalNameLess(a.name, b.name); });
   for (size_t i = 1; i < entries.size(); ++i)
     if (entries[i].name == entries[i - 1].name)
-      throw InputError(pose_file, "'" + entries[i].name + "' has two poses");
+      throw InputError(pose_file, InputToken(entries[i].name) + " has two poses");
 
   // An image name is a path *inside* the image folder: absolute names and
   // ".." components would let a pose file point the reader anywhere.
@@ -382,7 +396,7 @@ Dataset Dataset::Open(const DatasetOptions& options) {
     bool escapes = n.is_absolute() || n.has_root_name() || n.has_root_directory();
     for (const fs::path& part : n) escapes = escapes || part == "..";
     if (escapes)
-      throw InputError(pose_file, "image name '" + e.name + "' leaves the image folder (absolute or '..')");
+      throw InputError(pose_file, "image name " + InputToken(e.name) + " leaves the image folder (absolute or '..')");
   }
 
   if (ds.video_path_.empty()) {
@@ -516,11 +530,20 @@ cv::Mat Dataset::ReadMask(int i) const {
   std::string file;
   if (!v.mask_path.empty()) {
     file = v.mask_path.string();
+    // Its size from its header before it is decoded (any format, image_header.h).
+    const auto [hw, hh] = ImageFileHeaderSize(v.mask_path);
+    if (hw != v.source_width || hh != v.source_height)
+      throw InputError(file, "mask header is " + std::to_string(hw) + "x" + std::to_string(hh) + " but its image is " +
+                                 std::to_string(v.source_width) + "x" + std::to_string(v.source_height));
     // IMREAD_IGNORE_ORIENTATION as for the frames (COLMAP ignores EXIF orientation).
     raw = cv::imread(file, cv::IMREAD_GRAYSCALE | cv::IMREAD_IGNORE_ORIENTATION);
     if (raw.empty()) throw InputError(file, "mask cannot be read");
   } else if (mask_source_ == "alpha") {
     file = ImagePath(i).string();
+    const auto [hw, hh] = ImageFileHeaderSize(ImagePath(i));  // checked before it is decoded again
+    if (hw != v.source_width || hh != v.source_height)
+      throw InputError(file, "image header is " + std::to_string(hw) + "x" + std::to_string(hh) + ", was " +
+                                 std::to_string(v.source_width) + "x" + std::to_string(v.source_height));
     const cv::Mat image = cv::imread(file, cv::IMREAD_UNCHANGED);
     if (image.empty()) throw InputError(file, "image cannot be read");
     if (image.channels() != 4 && image.channels() != 2) return cv::Mat();

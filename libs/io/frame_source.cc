@@ -14,6 +14,7 @@
 #include <opencv2/videoio.hpp>
 
 #include "io/depth_map_io.h"
+#include "io/image_header.h"
 #include "util/error.h"
 
 namespace lfrecon {
@@ -243,6 +244,13 @@ cv::Mat ReadImageFloat(const fs::path& path, std::optional<cv::Size> expect) {
   }
   // PNG/JPEG from the bytes read; other formats from the file (some OpenCV decoders read files only).
   if (ReadImageHeader(bytes)) return DecodeImageFloat(bytes, file, expect);
+  // Any other format: its size from its header too, before a pixel is decoded
+  // (image_header.h); a format whose header cannot be read is refused.
+  {
+    const auto [width, height] = OtherImageSize(path, bytes);
+    auto to_int = [](long long v) { return static_cast<int>(std::min<long long>(v, std::numeric_limits<int>::max())); };
+    CheckImageSize(file, to_int(width), to_int(height), "image header", expect);
+  }
   bytes = std::string();
   cv::Mat raw;
   try {

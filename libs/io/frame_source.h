@@ -66,7 +66,9 @@ cv::Mat DecodeImageFloat(const std::string& bytes, const std::string& what, std:
 // PNG and JPEG headers are checked before decoding: the size against `expect`
 // (the frame's camera, when given) and kMaxImagePixels; a JPEG without its
 // end-of-image marker (truncated) is refused rather than decoded half grey.
-// Other formats are decoded first, then checked.
+// Every other format's size is read from its header too (image_header.h: TIFF,
+// BMP, WebP, EXR, PNM, ...) and checked the same way before decoding; a format
+// whose header cannot be read is refused, naming the file.
 cv::Mat ReadImageFloat(const std::filesystem::path& path, std::optional<cv::Size> expect = std::nullopt);
 // Writes CV_32FC3 [0, 1] (or 8-bit) to PNG/JPEG (by extension); throws InputError naming it.
 void WriteImageFloat(const std::filesystem::path& path, const cv::Mat& image, int jpeg_quality = 95);
