@@ -67,6 +67,23 @@ pb::Envelope Aggregator::Handle(const pb::Envelope& req, Deferred* deferred, con
     if (!JobStore::ValidJobId(req.job_id()))
       return ErrorEnvelope(pb::ERROR_UNKNOWN_JOB, "invalid job id '" + req.job_id() + "'", req.job_id());
     Job* job = FindJob(req.job_id());
+    if (!job && req.has_status() && fs::exists(store_.JobDir(req.job_id()) / "stream.pb")) {
+      // A client-pushed stream still open at ingest (its manifest comes at its end), or one that failed there.
+      pb::Envelope out = NewEnvelope(req.job_id());
+      pb::JobStatus* s = out.mutable_job_status();
+      if (auto st = store_.ReadText(req.job_id(), "status.pb")) {
+        if (!s->ParseFromString(*st)) return ErrorEnvelope(pb::ERROR_INTERNAL, "corrupt status.pb", req.job_id());
+        return out;
+      }
+      s->set_state(pb::STATE_INGESTING);
+      std::error_code ec;
+      std::uint32_t frames = 0;
+      for (const auto& e : fs::directory_iterator(store_.JobDir(req.job_id()) / "frames", ec))
+        frames += e.path().extension() == ".pb";
+      s->set_frames_spooled(frames);
+      s->set_message("stream open: the plan is computed when it ends");
+      return out;
+    }
     if (!job) return ErrorEnvelope(pb::ERROR_UNKNOWN_JOB, "unknown job '" + req.job_id() + "'", req.job_id());
     pb::Envelope ack = NewEnvelope(job->id);
     ack.mutable_ack();

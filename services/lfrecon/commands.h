@@ -17,6 +17,8 @@ void AddReportCommand(CLI::App& root, int* exit_code);
 void AddPosesCommand(CLI::App& root, int* exit_code);
 // submit, status, export, cancel (service_commands.cc)
 void AddServiceCommands(CLI::App& root, int* exit_code);
+// stream: a client-pushed job (stream_command.cc)
+void AddStreamCommand(CLI::App& root, int* exit_code);
 // keygen: CURVE key pairs for the service (keygen_command.cc)
 void AddKeygenCommand(CLI::App& root, int* exit_code);
 

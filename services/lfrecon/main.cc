@@ -33,6 +33,7 @@ int main(int argc, char** argv) {
   lfrecon::cli::AddReportCommand(app, &exit_code);
   lfrecon::cli::AddPosesCommand(app, &exit_code);
   lfrecon::cli::AddServiceCommands(app, &exit_code);
+  lfrecon::cli::AddStreamCommand(app, &exit_code);
   lfrecon::cli::AddKeygenCommand(app, &exit_code);
 
   try {

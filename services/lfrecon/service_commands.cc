@@ -12,36 +12,12 @@
 #include "common/job_store.h"
 #include "common/messaging.h"
 #include "dataset_flags.h"
+#include "service_client.h"
 #include "util/error.h"
 
 namespace lfrecon::cli {
 namespace fs = std::filesystem;
 namespace pb = ::lfrecon::v1;
-
-namespace {
-
-struct Endpoints {
-  std::string ingest = svc::EndpointFromEnv("LFRECON_INGEST", svc::kDefaultIngestEndpoint);
-  std::string aggregate = svc::EndpointFromEnv("LFRECON_AGGREGATE", svc::kDefaultAggregateEndpoint);
-  int timeout_ms = 30000;
-  // CURVE (common/auth.h): this client's key file and the daemons' public keys.
-  std::string key = svc::EndpointFromEnv("LFRECON_KEY", "");
-  std::string ingest_key = svc::EndpointFromEnv("LFRECON_INGEST_KEY", "");
-  std::string aggregate_key = svc::EndpointFromEnv("LFRECON_AGGREGATE_KEY", "");
-  bool insecure = false;
-  svc::ClientSecurity Security(const std::string& endpoint) const {
-    svc::SecurityFlags f;
-    f.key = key;
-    f.server_key = endpoint == ingest ? ingest_key : aggregate_key;
-    f.insecure = insecure;
-    if (f.key.empty() && f.server_key.empty()) {
-      svc::ClientSecurity plain;
-      plain.insecure = insecure;
-      return plain;
-    }
-    return svc::ResolveClientSecurity(f);
-  }
-};
 
 // Turns an error reply into the CLI's errors (exit 1 for input/job problems, 2 for usage).
 [[noreturn]] void Rethrow(const svc::ServiceError& e, const std::string& endpoint) {
@@ -74,6 +50,8 @@ void AddEndpointFlags(CLI::App* cmd, Endpoints* e, bool ingest) {
   cmd->add_flag("--insecure", e->insecure, "Allow plain TCP: no authentication, no encryption");
 }
 
+namespace {
+
 std::string Abs(const fs::path& p) { return p.empty() ? std::string() : fs::absolute(p).lexically_normal().string(); }
 
 nlohmann::json StatusJson(const std::string& job, const pb::JobStatus& s) {
@@ -90,6 +68,8 @@ nlohmann::json StatusJson(const std::string& job, const pb::JobStatus& s) {
           {"seconds", s.seconds()},
           {"message", s.message()}};
 }
+
+}  // namespace
 
 bool Ended(pb::JobState s) { return s == pb::STATE_DONE || s == pb::STATE_FAILED || s == pb::STATE_CANCELLED; }
 
@@ -127,33 +107,45 @@ int PrintStatus(const std::string& job, const pb::JobStatus& s, bool json) {
   return s.state() == pb::STATE_FAILED ? 1 : 0;
 }
 
-}  // namespace
+void JobOptionFlags::AddTo(CLI::App* cmd) {
+  cmd->add_option("--voxel-mm", voxel_mm, "Voxel edge in mm (default: the longest side of V / 256)");
+  cmd->add_option("--sigma-s", sigma_s, "σ_s of the fusion (as lfrecon run)");
+  cmd->add_flag("--no-densify", no_densify, "Fuse the filtered sparse maps (as lfrecon run)");
+  cmd->add_flag("--all-views", all_views,
+                "Process every view (as lfrecon run --all-views); by default a dense video's views are selected "
+                ">= 0.5 deg apart");
+  cmd->add_option("--color-views", color_views, "Frames used to colour the mesh (0: none)")->capture_default_str();
+}
+
+pb::JobOptions JobOptionFlags::ToProto() const {
+  if (voxel_mm < 0 || sigma_s < 0) throw OptionError("--voxel-mm and --sigma-s must be positive");
+  pb::JobOptions o;
+  o.set_voxel_size(voxel_mm / 1000.0);
+  o.set_sigma_s(sigma_s);
+  o.set_no_densify(no_densify);
+  o.set_color_views(color_views);
+  o.set_all_views(all_views);
+  svc::JobPipelineOptions(o);  // every job option checked here, as lfrecon run does (exit 2)
+  return o;
+}
 
 void AddServiceCommands(CLI::App& root, int* exit_code) {
   {
     struct Args {
       DatasetFlags data;
       Endpoints ep;
-      double voxel_mm = 0, sigma_s = 0;
-      bool no_densify = false, wait = false, all_views = false;
-      int color_views = 8;
+      JobOptionFlags job;
+      bool wait = false;
       double wait_s = 3600;
     };
     auto a = std::make_shared<Args>();
     auto* cmd = root.add_subcommand("submit", "Submit a job to the streaming service; prints its id");
     a->data.AddTo(cmd);
     AddEndpointFlags(cmd, &a->ep, true);
-    cmd->add_option("--voxel-mm", a->voxel_mm, "Voxel edge in mm (default: the longest side of V / 256)");
-    cmd->add_option("--sigma-s", a->sigma_s, "σ_s of the fusion (as lfrecon run)");
-    cmd->add_flag("--no-densify", a->no_densify, "Fuse the filtered sparse maps (as lfrecon run)");
-    cmd->add_flag("--all-views", a->all_views,
-                  "Process every view (as lfrecon run --all-views); by default a dense video's views are selected "
-                  ">= 0.5 deg apart");
-    cmd->add_option("--color-views", a->color_views, "Frames used to colour the mesh (0: none)")->capture_default_str();
+    a->job.AddTo(cmd);
     cmd->add_flag("--wait", a->wait, "Wait until the job ends and print its status");
     cmd->add_option("--wait-s", a->wait_s, "With --wait: give up after this many seconds")->capture_default_str();
     cmd->callback([a, exit_code] {
-      if (a->voxel_mm < 0 || a->sigma_s < 0) throw OptionError("--voxel-mm and --sigma-s must be positive");
       const DatasetOptions d = a->data.Resolve();
       pb::Envelope req = svc::NewEnvelope();
       pb::JobSpec* spec = req.mutable_submit()->mutable_spec();
@@ -166,12 +158,7 @@ void AddServiceCommands(CLI::App& root, int* exit_code) {
         throw OptionError("--masks: the service reads masks from the dataset folder (DATASET/masks/ or mask_path) only");
       spec->set_max_image_size(static_cast<std::uint32_t>(d.max_image_size));
       for (double v : a->data.bbox) spec->add_bbox(v);
-      spec->mutable_options()->set_voxel_size(a->voxel_mm / 1000.0);
-      spec->mutable_options()->set_sigma_s(a->sigma_s);
-      spec->mutable_options()->set_no_densify(a->no_densify);
-      spec->mutable_options()->set_color_views(a->color_views);
-      spec->mutable_options()->set_all_views(a->all_views);
-      svc::JobPipelineOptions(spec->options());  // every job option checked here, as lfrecon run does (exit 2)
+      *spec->mutable_options() = a->job.ToProto();
       const pb::Envelope reply = Call(a->ep, a->ep.ingest, req, a->ep.timeout_ms);
       const std::string job = reply.submit_reply().job_id();
       std::cout << job << "\n" << std::flush;

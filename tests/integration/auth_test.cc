@@ -292,6 +292,12 @@ TEST_F(AuthTest, EachKeyOnlySendsWhatItsRoleMay) {
   submit.mutable_submit()->mutable_spec()->set_dataset_dir(g_ref->dataset.string());
   auto worker_ing = Client(ing_, "worker", "ingest");
   expect_forbidden(*worker_ing, submit, "worker submit");
+  pb::Envelope stream_open = NewEnvelope();  // client-pushed streams: a client's, never a worker's
+  stream_open.mutable_stream_open()->set_credits(2);
+  expect_forbidden(*worker_ing, stream_open, "worker stream open");
+  pb::Envelope stream_frame = NewEnvelope("j1");
+  stream_frame.mutable_stream_frame()->mutable_frame()->set_index(0);
+  expect_forbidden(*worker_ing, stream_frame, "worker stream frame");
   EXPECT_TRUE(worker_ing->Request(Ping(), milliseconds(5000))->has_pong());
   EXPECT_TRUE(NoJobs(store_));
   // A real job, submitted by the client.

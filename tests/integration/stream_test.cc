@@ -1,0 +1,318 @@
+// Client-pushed streams (proto/README.md "Streams"): `lfrecon stream` of a
+// generated loop spaced under 0.5° gives lfrecon run's mesh; a client faster
+// than ingest is held to its credits; repeated and out-of-order frames follow
+// the documented policy (a repeat is ignored, any order is accepted, gaps fail
+// the job at the end); a client that dies mid-stream fails its job after the
+// stream timeout. Real daemons over ipc:// in a temporary folder.
+#include <gtest/gtest.h>
+
+#include <chrono>
+#include <memory>
+#include <nlohmann/json.hpp>
+#include <thread>
+
+#include "common/job_store.h"
+#include "common/messaging.h"
+#include "common/stream_client.h"
+#include "common/test_util.h"
+#include "integration/daemon_process.h"
+#include "io/dataset.h"
+#include "io/depth_map_io.h"
+#include "io/ply.h"
+
+namespace lfrecon::svc {
+namespace {
+namespace fs = std::filesystem;
+using lfrecon::testing::DaemonProcess;
+using lfrecon::testing::RunShell;
+using std::chrono::milliseconds;
+
+const std::string kBin = std::string(LFRECON_BINARY_DIR) + "/bin/";
+constexpr double kVoxelMm = 6.0;
+
+std::string Sh(const std::string& cmd) {
+  const auto r = RunShell(cmd);
+  EXPECT_EQ(r.code, 0) << cmd << "\n" << r.output;
+  return r.output;
+}
+
+std::string LastLine(std::string s) {
+  s.erase(s.find_last_not_of('\n') + 1);
+  const auto nl = s.rfind('\n');
+  return nl == std::string::npos ? s : s.substr(nl + 1);
+}
+
+class StreamTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    store_ = tmp_.path() / "store";
+    agg_ = "ipc://" + (tmp_.path() / "agg.sock").string();
+    ing_ = "ipc://" + (tmp_.path() / "ing.sock").string();
+  }
+  void TearDown() override {
+    if (HasFailure())
+      for (const auto& p : procs_) std::printf("---- %s ----\n%s\n", p->log().c_str(), p->LogTail(3000).c_str());
+    procs_.clear();
+  }
+  DaemonProcess* Start(const std::string& exe, std::vector<std::string> args) {
+    args.insert(args.begin(), kBin + exe);
+    procs_.push_back(std::make_unique<DaemonProcess>(args, tmp_.path() / (exe + std::to_string(procs_.size()) + ".log")));
+    return procs_.back().get();
+  }
+  void StartStack(std::vector<std::string> ingest_args, bool workers) {
+    Start("lfrecon-aggregate", {"--bind", agg_, "--store", store_.string()});
+    std::vector<std::string> a = {"--bind", ing_, "--aggregate", agg_, "--store", store_.string()};
+    a.insert(a.end(), ingest_args.begin(), ingest_args.end());
+    Start("lfrecon-ingest", a);
+    if (workers) {
+      Start("lfrecon-depth", {"--aggregate", agg_, "--store", store_.string()});
+      Start("lfrecon-propagate", {"--aggregate", agg_, "--store", store_.string()});
+    }
+  }
+  pb::JobStatus Status(const std::string& job) {
+    RequestClient c(context_, agg_);
+    pb::Envelope req = NewEnvelope(job);
+    req.mutable_status();
+    auto r = c.Request(req, milliseconds(5000));
+    if (!r || !r->has_job_status()) return pb::JobStatus();
+    return r->job_status();
+  }
+  // A small generated dataset: `frames` frames 0.3° apart.
+  // JPEG frames (the store keeps their bytes; the daemons decode the bytes lfrecon run decodes).
+  fs::path Synth(int frames, int width, int height) {
+    const fs::path data = tmp_.path() / "dataset";
+    Sh(kBin + "lfrecon -q synth --scene sphere --frames " + std::to_string(frames) + " --loops " +
+       std::to_string(frames * 0.3 / 360.0) + " --width " + std::to_string(width) + " --height " +
+       std::to_string(height) + " --depth-every 0 --no-meshes --format jpg --out " + data.string());
+    return data;
+  }
+  // The frames of `data` as a client pushes them.
+  std::vector<pb::Frame> Frames(const fs::path& data, BoundingBox* volume) {
+    DatasetOptions d;
+    d.dataset_dir = data;
+    const Dataset ds = Dataset::Open(d);
+    *volume = ds.bbox();
+    StoreFrameEncoder enc(ds);
+    std::vector<pb::Frame> out;
+    for (int k = 0; k < ds.NumViews(); ++k) out.push_back(enc.Encode(k, false));
+    return out;
+  }
+  static pb::StreamOpen Open(const BoundingBox& v, int credits) {
+    pb::StreamOpen open;
+    for (int k = 0; k < 3; ++k) open.mutable_spec()->add_bbox(v.min(k));
+    for (int k = 0; k < 3; ++k) open.mutable_spec()->add_bbox(v.max(k));
+    open.set_credits(static_cast<std::uint32_t>(credits));
+    return open;
+  }
+
+  lfrecon::testing::TempDir tmp_;
+  fs::path store_;
+  std::string agg_, ing_;
+  zmq::context_t context_{1};
+  std::vector<std::unique_ptr<DaemonProcess>> procs_;
+};
+
+// `lfrecon stream` of a 0.3°-spaced arc: the job's plan (computed at the end
+// of the stream from every camera) is lfrecon run's, so the same views get the
+// same bit-identical dense maps and the fused meshes are the same.
+TEST_F(StreamTest, StreamOfDenseArcEqualsRun) {
+  constexpr int kFrames = 40;
+  const fs::path data = Synth(kFrames, 160, 90);
+  const fs::path run_dir = tmp_.path() / "run";
+  Sh(kBin + "lfrecon -q run --dataset " + data.string() + " --no-refine-poses --no-refine --write-depth --voxel-mm " +
+     std::to_string(kVoxelMm) + " --out " + run_dir.string());
+  const nlohmann::json report = nlohmann::json::parse(ReadFileBytes(run_dir / "report.json"));
+  const int selected = report["views"]["processed"];
+  EXPECT_EQ(selected, kFrames / 2);
+  StartStack({}, true);
+  const fs::path stats = tmp_.path() / "stats.json", follow = tmp_.path() / "follow.ply";
+  const std::string out = Sh(kBin + "lfrecon -q stream --ingest " + ing_ + " --aggregate " + agg_ + " --dataset " +
+                             data.string() + " --voxel-mm " + std::to_string(kVoxelMm) + " --credits 4 --stats " +
+                             stats.string() + " --follow " + follow.string() + " --follow-s 0.5 --wait-s 400");
+  const std::string job = out.substr(0, out.find('\n'));
+  ASSERT_TRUE(JobStore::ValidJobId(job)) << out;
+  EXPECT_NE(LastLine(out).find("DONE"), std::string::npos) << out;
+  const nlohmann::json st = nlohmann::json::parse(ReadFileBytes(stats));
+  EXPECT_EQ(st["frames"], kFrames);
+  EXPECT_LE(st["max_in_flight"].get<int>(), 4);
+  EXPECT_LE(st["max_in_flight_ingest"].get<int>(), 4);
+  EXPECT_LE(st["bytes_per_pixel"].get<double>(), 1.5);
+  const pb::JobStatus s = Status(job);
+  EXPECT_EQ(s.state(), pb::STATE_DONE) << s.message();
+  EXPECT_EQ(s.frames_spooled(), static_cast<unsigned>(kFrames));
+  EXPECT_EQ(s.views_fused(), static_cast<unsigned>(selected));
+  // The manifest: the stream's cameras, as the dataset's.
+  JobStore js(store_);
+  const pb::JobManifest m = js.ReadManifest(job);
+  EXPECT_EQ(m.pose_source(), "stream");
+  ASSERT_EQ(m.views_size(), kFrames);
+  DatasetOptions d;
+  d.dataset_dir = data;
+  const Dataset ds = Dataset::Open(d);
+  int compared = 0, identical = 0;
+  for (int v = 0; v < kFrames; ++v) {
+    const fs::path pfm = run_dir / "depth" / (fs::path(ds.views()[v].name).stem().string() + ".pfm");
+    EXPECT_EQ(fs::exists(pfm), js.HasMap(job, pb::MAP_DENSE, v)) << "view " << v;
+    if (!fs::exists(pfm) || !js.HasMap(job, pb::MAP_DENSE, v)) continue;
+    ++compared;
+    identical += cv::norm(ReadPfm(pfm), js.ReadMap(job, pb::MAP_DENSE, v, ds.View(v)).depth, cv::NORM_INF) == 0;
+  }
+  EXPECT_EQ(compared, selected);
+  EXPECT_EQ(identical, compared);
+  const TriangleMesh run_mesh = ReadPly(run_dir / "mesh_raw.ply");
+  const TriangleMesh svc_mesh = ReadPly(store_ / job / "mesh_raw.ply");
+  ASSERT_GT(run_mesh.triangles.size(), 100u);
+  ASSERT_EQ(svc_mesh.vertices.size(), run_mesh.vertices.size());
+  EXPECT_EQ(svc_mesh.triangles.size(), run_mesh.triangles.size());
+  double max_dv = 0;
+  for (std::size_t k = 0; k < svc_mesh.vertices.size(); ++k)
+    max_dv = std::max(max_dv, static_cast<double>((svc_mesh.vertices[k] - run_mesh.vertices[k]).norm()));
+  EXPECT_EQ(max_dv, 0.0);
+  // --follow wrote the final mesh (the job's coloured mesh.ply).
+  ASSERT_TRUE(fs::exists(follow));
+  EXPECT_EQ(ReadPly(follow).triangles.size(), ReadPly(store_ / job / "mesh.ply").triangles.size());
+  std::printf("stream: %d frames, %.1f frames/s, %.3f bytes a pixel stored, at most %d in flight; %d/%d dense maps "
+              "identical to lfrecon run's, mesh_raw %zu vertices, largest difference %.3g m\n",
+              kFrames, st["frames_per_second"].get<double>(), st["bytes_per_pixel"].get<double>(),
+              st["max_in_flight"].get<int>(), identical, compared, svc_mesh.vertices.size(), max_dv);
+}
+
+// A client faster than ingest (each frame takes ingest 40 ms to store): it is
+// held to its 3 credits, ingest never has more than 3 of its frames, and one
+// that ignores the credits is refused (ERROR_BUSY) instead of buffered.
+TEST_F(StreamTest, FastClientIsBoundedByCredits) {
+  const fs::path data = Synth(16, 64, 36);
+  BoundingBox v;
+  const std::vector<pb::Frame> frames = Frames(data, &v);
+  StartStack({"--frame-delay-ms", "40"}, false);
+  StreamClient client(context_, ing_);
+  const pb::StreamOpened opened = client.Open(Open(v, 3), milliseconds(10000));
+  EXPECT_EQ(opened.credits(), 3u);
+  const auto start = std::chrono::steady_clock::now();
+  for (const pb::Frame& f : frames) {
+    client.Push(f, milliseconds(10000));
+    EXPECT_LE(client.in_flight(), 3);
+  }
+  const pb::StreamEnded ended = client.End(static_cast<std::uint32_t>(frames.size()), milliseconds(30000));
+  const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  EXPECT_EQ(ended.num_frames(), frames.size());
+  EXPECT_EQ(client.max_in_flight(), 3);  // it did run ahead, as far as its credits
+  EXPECT_LE(ended.max_in_flight(), 3u);
+  EXPECT_GE(ended.max_in_flight(), 2u);
+  EXPECT_GE(seconds, 16 * 0.040 * 0.9);  // slowed to ingest's pace
+  // Ignoring the credits: 8 frames at once to a 2-credit stream; the ones beyond the credits are refused.
+  StreamClient rude(context_, ing_);
+  rude.Open(Open(v, 2), milliseconds(10000));
+  for (int k = 0; k < 8; ++k) {
+    pb::Envelope env = NewEnvelope();
+    *env.mutable_stream_frame()->mutable_frame() = frames[static_cast<std::size_t>(k)];
+    rude.SendUnchecked(env);
+  }
+  int busy = 0, credits = 0;
+  for (int k = 0; k < 8; ++k) {
+    auto r = rude.Receive(milliseconds(10000));
+    ASSERT_TRUE(r.has_value());
+    busy += r->has_error() && r->error().code() == pb::ERROR_BUSY;
+    credits += r->has_stream_credit();
+  }
+  EXPECT_GE(busy, 5);
+  EXPECT_EQ(busy + credits, 8);
+  std::printf("credits: 16 frames in %.2f s (ingest 40 ms a frame), at most %d in flight (ingest %u); a client "
+              "ignoring 2 credits: %d of 8 refused\n",
+              seconds, client.max_in_flight(), ended.max_in_flight(), busy);
+}
+
+// Policy: any order is accepted; a repeated index is ignored (the first copy
+// kept, answered `repeated`); the end needs frames 0..n-1, a gap fails the job.
+TEST_F(StreamTest, OutOfOrderAcceptedRepeatIgnoredGapFails) {
+  const fs::path data = Synth(6, 64, 36);
+  BoundingBox v;
+  const std::vector<pb::Frame> frames = Frames(data, &v);
+  StartStack({}, false);
+  StreamClient client(context_, ing_);
+  client.Open(Open(v, 4), milliseconds(10000));
+  pb::Frame changed = frames[1];
+  changed.mutable_camera()->set_name("second copy");
+  for (int k : {3, 1, 0, 5, 2, 4}) client.Push(frames[static_cast<std::size_t>(k)], milliseconds(10000));
+  client.Push(changed, milliseconds(10000));
+  const pb::StreamEnded ended = client.End(6, milliseconds(30000));
+  EXPECT_EQ(ended.num_frames(), 6u);
+  EXPECT_EQ(client.repeated(), 1);
+  JobStore js(store_);
+  const pb::JobManifest m = js.ReadManifest(client.job_id());
+  ASSERT_EQ(m.views_size(), 6);
+  for (int k = 0; k < 6; ++k) EXPECT_EQ(m.views(k).name(), frames[static_cast<std::size_t>(k)].camera().name());
+  EXPECT_EQ(Status(client.job_id()).frames_spooled(), 6u);
+  // A gap: frames 0, 1, 3 then the end.
+  StreamClient gap(context_, ing_);
+  gap.Open(Open(v, 4), milliseconds(10000));
+  for (int k : {0, 1, 3}) gap.Push(frames[static_cast<std::size_t>(k)], milliseconds(10000));
+  try {
+    gap.End(0, milliseconds(30000));
+    ADD_FAILURE() << "a stream with a gap ended";
+  } catch (const ServiceError& e) {
+    EXPECT_NE(std::string(e.what()).find("frame 2"), std::string::npos) << e.what();
+  }
+  const pb::JobStatus s = Status(gap.job_id());
+  EXPECT_EQ(s.state(), pb::STATE_FAILED);
+  EXPECT_NE(s.message().find("missing"), std::string::npos) << s.message();
+  // A frame whose image does not match its camera is refused (not stored); the stream goes on.
+  StreamClient bad(context_, ing_);
+  bad.Open(Open(v, 4), milliseconds(10000));
+  pb::Frame wrong = frames[0];
+  wrong.mutable_source()->set_stored_width(wrong.source().stored_width() * 2);
+  wrong.mutable_source()->set_width(wrong.source().width() * 2);
+  wrong.mutable_camera()->set_width(wrong.camera().width() * 2);
+  pb::Envelope env = NewEnvelope();
+  *env.mutable_stream_frame()->mutable_frame() = wrong;
+  bad.SendUnchecked(env);
+  auto r = bad.Receive(milliseconds(10000));
+  ASSERT_TRUE(r.has_value());
+  ASSERT_TRUE(r->has_error());
+  EXPECT_EQ(r->error().code(), pb::ERROR_INPUT);
+  EXPECT_NE(r->error().message().find("image header is 64x36 but its camera is 128x36"), std::string::npos)
+      << r->error().message();
+  bad.Push(frames[0], milliseconds(10000));  // the same index again, now whole: stored
+  EXPECT_EQ(bad.End(1, milliseconds(30000)).num_frames(), 1u);
+}
+
+// A client that dies mid-stream: after --stream-timeout-s without a message the
+// job fails with the reason (it never waits for ever); frames after that are refused.
+TEST_F(StreamTest, ClientGoneMidStreamFailsTheJob) {
+  const fs::path data = Synth(6, 64, 36);
+  BoundingBox v;
+  const std::vector<pb::Frame> frames = Frames(data, &v);
+  StartStack({"--stream-timeout-s", "1"}, false);
+  std::string job;
+  {
+    StreamClient client(context_, ing_);
+    client.Open(Open(v, 4), milliseconds(10000));
+    job = client.job_id();
+    for (int k = 0; k < 3; ++k) client.Push(frames[static_cast<std::size_t>(k)], milliseconds(10000));
+    EXPECT_EQ(Status(job).state(), pb::STATE_INGESTING);
+  }  // gone without an end
+  pb::JobStatus s;
+  for (int i = 0; i < 100 && s.state() != pb::STATE_FAILED; ++i) {
+    std::this_thread::sleep_for(milliseconds(100));
+    s = Status(job);
+  }
+  EXPECT_EQ(s.state(), pb::STATE_FAILED);
+  EXPECT_NE(s.message().find("client gone"), std::string::npos) << s.message();
+  EXPECT_EQ(s.frames_spooled(), 3u);
+  StreamClient late(context_, ing_);
+  pb::Envelope env = NewEnvelope(job);
+  *env.mutable_stream_frame()->mutable_frame() = frames[3];
+  late.SendUnchecked(env);
+  auto r = late.Receive(milliseconds(5000));
+  ASSERT_TRUE(r.has_value());
+  EXPECT_TRUE(r->has_error());
+  // `lfrecon stream` against a dead ingest fails, naming the endpoint, instead of waiting for ever.
+  procs_[1]->Kill(SIGKILL);
+  const auto cli = RunShell(kBin + "lfrecon -q stream --ingest " + ing_ + " --aggregate " + agg_ + " --dataset " +
+                            data.string() + " --timeout-ms 1500");
+  EXPECT_EQ(cli.code, 1) << cli.output;
+  EXPECT_NE(cli.output.find("no answer"), std::string::npos) << cli.output;
+}
+
+}  // namespace
+}  // namespace lfrecon::svc
