@@ -648,8 +648,8 @@ TEST_F(FaultsTest, BoundsRefuseRequestsBeyondThem) {
   // A per-job quota smaller than the job: refused at submit, naming the quota.
   const std::string small = "ipc://" + (tmp_->path() / "ing_small.sock").string();
   const fs::path store2 = tmp_->path() / "store2";
-  Start("lfrecon-ingest", {"--bind", small, "--aggregate", agg_, "--store", store2.string(), "--job-quota-gb", "0.01"});
-  const auto quota = submit(small);  // 90 frames of 96x54: ~14 MB
+  Start("lfrecon-ingest", {"--bind", small, "--aggregate", agg_, "--store", store2.string(), "--job-quota-gb", "0.005"});
+  const auto quota = submit(small);  // 90 frames of 96x54 at ingest's 21 bytes a pixel (compact frames): ~9.8 MB
   EXPECT_EQ(quota.first, 1) << quota.second;
   EXPECT_NE(quota.second.find("per-job quota"), std::string::npos) << quota.second;
   // Exports: one at a time per lane and at most --max-queued-exports waiting.
