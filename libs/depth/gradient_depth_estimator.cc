@@ -10,6 +10,9 @@
 #include <cmath>
 #include <deque>
 #include <opencv2/imgproc.hpp>
+#if defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__))
+#include <immintrin.h>
+#endif
 
 #include "depth/image_sampling.h"
 #include "util/error.h"
@@ -139,6 +142,97 @@ cv::Mat GradientMagnitude(const cv::Mat& image_bgr) {
 
 namespace {
 
+// AVX2 bilinear sampling of four grey samples at once (the patches' rows).
+// Each lane does exactly the scalar FloatImage::Sample1 arithmetic (double
+// coordinates, truncation, float weights, the same operations in the same
+// order, no fused multiply-add), so results are bit-identical to it; the
+// caller picks this path at run time only on CPUs with AVX2.
+#if defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__))
+#define LFRECON_DEPTH_AVX2 1
+#define LFRECON_AVX2_FN __attribute__((target("avx2"))) inline
+bool CpuHasAvx2() {
+  static const bool has = __builtin_cpu_supports("avx2");
+  return has;
+}
+
+// Bilinear samples at (x, y) of the lanes in `want` (all-ones lanes); the
+// other lanes are not read. Returns the lanes that lie inside the image
+// (FloatImage::Cell's test), a subset of `want`.
+LFRECON_AVX2_FN __m256d Bilinear4(const FloatImage& img, __m256d x, __m256d y, __m256d want, __m128* out) {
+  const __m256d half = _mm256_set1_pd(0.5), zero = _mm256_setzero_pd();
+  const __m256d fx = _mm256_sub_pd(x, half), fy = _mm256_sub_pd(y, half);
+  __m256d ok = _mm256_and_pd(_mm256_cmp_pd(fx, zero, _CMP_GE_OQ), _mm256_cmp_pd(fx, _mm256_set1_pd(img.max_x), _CMP_LT_OQ));
+  ok = _mm256_and_pd(ok, _mm256_and_pd(_mm256_cmp_pd(fy, zero, _CMP_GE_OQ),
+                                       _mm256_cmp_pd(fy, _mm256_set1_pd(img.max_y), _CMP_LT_OQ)));
+  ok = _mm256_and_pd(ok, want);
+  // Lanes outside get index 0 (never read: masked gathers).
+  const __m256d fxs = _mm256_and_pd(fx, ok), fys = _mm256_and_pd(fy, ok);
+  const __m128i x0 = _mm256_cvttpd_epi32(fxs), y0 = _mm256_cvttpd_epi32(fys);
+  const __m128 ax = _mm256_cvtpd_ps(_mm256_sub_pd(fxs, _mm256_cvtepi32_pd(x0)));
+  const __m128 ay = _mm256_cvtpd_ps(_mm256_sub_pd(fys, _mm256_cvtepi32_pd(y0)));
+  const __m128i stride = _mm_set1_epi32(static_cast<int>(img.stride)), one = _mm_set1_epi32(1);
+  const __m128i i00 = _mm_add_epi32(_mm_mullo_epi32(y0, stride), x0);
+  const __m128i i10 = _mm_add_epi32(i00, stride);
+  // The 64-bit lane mask packed to 32-bit lanes.
+  const __m128 mask = _mm256_cvtpd_ps(_mm256_and_pd(ok, _mm256_set1_pd(-1.0)));
+  const __m128 none = _mm_setzero_ps();
+  const __m128 r00 = _mm_mask_i32gather_ps(none, img.data, i00, mask, 4);
+  const __m128 r01 = _mm_mask_i32gather_ps(none, img.data, _mm_add_epi32(i00, one), mask, 4);
+  const __m128 r10 = _mm_mask_i32gather_ps(none, img.data, i10, mask, 4);
+  const __m128 r11 = _mm_mask_i32gather_ps(none, img.data, _mm_add_epi32(i10, one), mask, 4);
+  const __m128 top = _mm_add_ps(r00, _mm_mul_ps(ax, _mm_sub_ps(r01, r00)));
+  const __m128 bottom = _mm_add_ps(r10, _mm_mul_ps(ax, _mm_sub_ps(r11, r10)));
+  *out = _mm_add_ps(top, _mm_mul_ps(ay, _mm_sub_ps(bottom, top)));
+  return ok;
+}
+
+LFRECON_AVX2_FN __m256d Lanes(int k) { return _mm256_set_pd(k + 3, k + 2, k + 1, k); }
+
+// Samples k..k+3 of a segment y0 + k·u; false if any lies outside.
+LFRECON_AVX2_FN bool SampleSegment4(const FloatImage& img, const Eigen::Vector2d& y0, const Eigen::Vector2d& u, int k,
+                                    float* out) {
+  const __m256d kk = Lanes(k);
+  const __m256d x = _mm256_add_pd(_mm256_set1_pd(y0.x()), _mm256_mul_pd(kk, _mm256_set1_pd(u.x())));
+  const __m256d y = _mm256_add_pd(_mm256_set1_pd(y0.y()), _mm256_mul_pd(kk, _mm256_set1_pd(u.y())));
+  __m128 v;
+  const __m256d all = _mm256_castsi256_pd(_mm256_set1_epi64x(-1));
+  if (_mm256_movemask_pd(Bilinear4(img, x, y, all, &v)) != 0xF) return false;
+  _mm_storeu_ps(out, v);
+  return true;
+}
+
+// The same samples with NaN where outside (SampleLine).
+LFRECON_AVX2_FN void SampleSegmentOrNan4(const FloatImage& img, const Eigen::Vector2d& y0, const Eigen::Vector2d& u,
+                                         int k, float* out) {
+  const __m256d kk = Lanes(k);
+  const __m256d x = _mm256_add_pd(_mm256_set1_pd(y0.x()), _mm256_mul_pd(kk, _mm256_set1_pd(u.x())));
+  const __m256d y = _mm256_add_pd(_mm256_set1_pd(y0.y()), _mm256_mul_pd(kk, _mm256_set1_pd(u.y())));
+  __m128 v;
+  const __m256d all = _mm256_castsi256_pd(_mm256_set1_epi64x(-1));
+  const __m256d ok = Bilinear4(img, x, y, all, &v);
+  const __m128 ok32 = _mm256_cvtpd_ps(_mm256_and_pd(ok, _mm256_set1_pd(-1.0)));
+  _mm_storeu_ps(out, _mm_blendv_ps(_mm_set1_ps(std::numeric_limits<float>::quiet_NaN()), v, ok32));
+}
+
+// Samples k..k+3 of the homogeneous segment base + k·step (dehomogenised);
+// false if any has z <= 0 or lies outside.
+LFRECON_AVX2_FN bool SampleProjective4(const FloatImage& img, const Eigen::Vector3d& base, const Eigen::Vector3d& step,
+                                       int k, float* out) {
+  const __m256d kk = Lanes(k);
+  const __m256d hx = _mm256_add_pd(_mm256_set1_pd(base.x()), _mm256_mul_pd(kk, _mm256_set1_pd(step.x())));
+  const __m256d hy = _mm256_add_pd(_mm256_set1_pd(base.y()), _mm256_mul_pd(kk, _mm256_set1_pd(step.y())));
+  const __m256d hz = _mm256_add_pd(_mm256_set1_pd(base.z()), _mm256_mul_pd(kk, _mm256_set1_pd(step.z())));
+  const __m256d front = _mm256_cmp_pd(hz, _mm256_setzero_pd(), _CMP_GT_OQ);
+  if (_mm256_movemask_pd(front) != 0xF) return false;
+  const __m256d inv_z = _mm256_div_pd(_mm256_set1_pd(1.0), hz);
+  __m128 v;
+  if (_mm256_movemask_pd(Bilinear4(img, _mm256_mul_pd(hx, inv_z), _mm256_mul_pd(hy, inv_z), front, &v)) != 0xF)
+    return false;
+  _mm_storeu_ps(out, v);
+  return true;
+}
+#endif  // AVX2
+
 // Geometry of one (reference i, neighbour j) pair that does not depend on the pixel.
 struct PairGeometry {
   const ViewImage* view = nullptr;
@@ -214,7 +308,11 @@ class PixelSolver {
  public:
   PixelSolver(const GradientDepthOptions& o, const FloatImage& ref_grey, const Eigen::Vector3f& ref_colour)
       : o_(o), ref_grey_(ref_grey), ref_colour_(ref_colour), half_(o.patch_length / 2),
-        inv_two_sigma_c2_(1.0 / (2.0 * o.sigma_c * o.sigma_c)) {}
+        inv_two_sigma_c2_(1.0 / (2.0 * o.sigma_c * o.sigma_c)) {
+#ifdef LFRECON_DEPTH_AVX2
+    avx2_ = CpuHasAvx2();
+#endif
+  }
 
   // Grey levels of I_j on ℓ at s0 - half, s0 - half + 1, ... (count + patch_length - 1
   // of them; NaN where the bilinear sample is outside): the patch rows on ℓ of
@@ -224,7 +322,12 @@ class PixelSolver {
     const int n = count + 2 * half_;
     line->resize(n);
     const Eigen::Vector2d y0 = ray.Point(s0 - half_);
-    for (int t = 0; t < n; ++t) {
+    int t = 0;
+#ifdef LFRECON_DEPTH_AVX2
+    if (avx2_)
+      for (; t + 4 <= n; t += 4) SampleSegmentOrNan4(ray.pair->grey_px, y0, ray.u, t, line->data() + t);
+#endif
+    for (; t < n; ++t) {
       const Eigen::Vector2d y = y0 + t * ray.u;
       float v;
       (*line)[t] = ray.pair->grey_px.Sample1(y.x(), y.y(), &v) ? v : std::numeric_limits<float>::quiet_NaN();
@@ -252,7 +355,22 @@ class PixelSolver {
     for (int row = -half_rows; row <= half_rows; ++row) {
       const Eigen::Vector2d y0 = ray.Point(s - half_) + row * ray.n;
       const Eigen::Vector3d base = ray.BackToReferenceH(Eigen::Vector3d(y0.x(), y0.y(), 1.0), d);
-      for (int k = 0; k < L; ++k) {
+      int k = 0;
+#ifdef LFRECON_DEPTH_AVX2
+      if (avx2_)
+        for (; k + 4 <= L; k += 4) {
+          if (line) {
+            for (int q = k; q < k + 4; ++q) {
+              sj[q] = line[q];
+              if (std::isnan(sj[q])) return m;
+            }
+          } else if (!SampleSegment4(grey_j, y0, ray.u, k, sj + k)) {
+            return m;
+          }
+          if (!SampleProjective4(ref_grey_, base, step, k, si + k)) return m;
+        }
+#endif
+      for (; k < L; ++k) {
         if (line) {
           sj[k] = line[k];
           if (std::isnan(sj[k])) return m;
@@ -354,6 +472,7 @@ class PixelSolver {
   Eigen::Vector3f ref_colour_;
   int half_;
   double inv_two_sigma_c2_;
+  bool avx2_ = false;  // four samples of a patch row at once (bit-identical)
 };
 
 // The per-pixel work of Estimate over rows [begin, end); returns the number of
