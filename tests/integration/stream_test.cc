@@ -276,6 +276,57 @@ TEST_F(StreamTest, OutOfOrderAcceptedRepeatIgnoredGapFails) {
   EXPECT_EQ(bad.End(1, milliseconds(30000)).num_frames(), 1u);
 }
 
+// Intrinsics (and the source camera) once per job: frames carry only their
+// pose; a raw 8-bit frame ("bgr8") is stored as lossless PNG; the manifest has
+// every frame's full camera.
+TEST_F(StreamTest, IntrinsicsOncePerJobAndRawFrames) {
+  const fs::path data = Synth(4, 64, 36);
+  BoundingBox v;
+  const std::vector<pb::Frame> frames = Frames(data, &v);
+  StartStack({}, false);
+  StreamClient client(context_, ing_);
+  pb::StreamOpen open = Open(v, 2);
+  pb::Camera* intr = open.mutable_intrinsics();
+  intr->set_width(frames[0].camera().width());
+  intr->set_height(frames[0].camera().height());
+  *intr->mutable_k() = frames[0].camera().k();
+  *open.mutable_source() = frames[0].source();
+  client.Open(open, milliseconds(10000));
+  for (int k = 0; k < 3; ++k) {
+    pb::Frame f = frames[static_cast<std::size_t>(k)];
+    f.mutable_camera()->clear_k();
+    f.mutable_camera()->clear_width();
+    f.mutable_camera()->clear_height();
+    f.clear_source();
+    client.Push(f, milliseconds(10000));
+  }
+  // Frame 3 raw: the decoded pixels as 8-bit BGR.
+  pb::Frame raw = frames[3];
+  const cv::Mat img = FrameFromProto(raw, 64, 36, "frame 3");
+  cv::Mat u8;
+  img.convertTo(u8, CV_8U, 255.0);
+  raw.clear_source();
+  raw.set_encoding("bgr8");
+  raw.set_data(std::string(reinterpret_cast<const char*>(u8.data), u8.total() * 3));
+  client.Push(raw, milliseconds(10000));
+  EXPECT_EQ(client.End(4, milliseconds(30000)).num_frames(), 4u);
+  JobStore js(store_);
+  const pb::JobManifest m = js.ReadManifest(client.job_id());
+  ASSERT_EQ(m.views_size(), 4);
+  for (int k = 0; k < 4; ++k) {
+    EXPECT_EQ(m.views(k).k_size(), 9);
+    EXPECT_EQ(m.views(k).width(), 64u);
+    const PinholeView view = CameraFromProto(m.views(k), "manifest");
+    EXPECT_EQ(cv::norm(js.ReadFrame(client.job_id(), k, view), FrameFromProto(frames[static_cast<std::size_t>(k)], 64, 36, "f"),
+                       cv::NORM_INF),
+              0.0)
+        << "frame " << k;
+  }
+  pb::Frame stored;
+  ASSERT_TRUE(stored.ParseFromString(ReadFileBytes(js.FramePath(client.job_id(), 3))));
+  EXPECT_EQ(stored.encoding(), "png");
+}
+
 // A client that dies mid-stream: after --stream-timeout-s without a message the
 // job fails with the reason (it never waits for ever); frames after that are refused.
 TEST_F(StreamTest, ClientGoneMidStreamFailsTheJob) {
