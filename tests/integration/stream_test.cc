@@ -325,6 +325,16 @@ TEST_F(StreamTest, IntrinsicsOncePerJobAndRawFrames) {
   pb::Frame stored;
   ASSERT_TRUE(stored.ParseFromString(ReadFileBytes(js.FramePath(client.job_id(), 3))));
   EXPECT_EQ(stored.encoding(), "png");
+  // Without V: estimated from the cameras at the end, as io/Dataset estimates it.
+  StreamClient nov(context_, ing_);
+  pb::StreamOpen open_nov;
+  open_nov.set_credits(2);
+  nov.Open(open_nov, milliseconds(10000));
+  for (const pb::Frame& f : frames) nov.Push(f, milliseconds(10000));
+  EXPECT_EQ(nov.End(4, milliseconds(30000)).num_frames(), 4u);
+  const pb::JobManifest mv = js.ReadManifest(nov.job_id());
+  EXPECT_EQ(mv.bbox_source(), "estimated");
+  EXPECT_EQ(mv.volume().min_size(), 3);
 }
 
 // A client that dies mid-stream: after --stream-timeout-s without a message the
