@@ -19,6 +19,8 @@ PACKAGES=(
   clang-14 libclang-rt-14-dev
   libceres-dev
   jq
+  # tests/integration/netns_test: network namespaces and veth pairs (ip netns; skips without root)
+  iproute2
   # tests/cli/report_html_test loads report.html in headless Chromium (skips without it)
   chromium
   colmap
