@@ -21,6 +21,8 @@ PACKAGES=(
   jq
   # tests/integration/netns_test: network namespaces and veth pairs (ip netns; skips without root)
   iproute2
+  # tests/deploy/k8s_manifests_test.py parses deploy/k8s/ (Debian's python3)
+  python3-yaml
   # tests/cli/report_html_test loads report.html in headless Chromium (skips without it)
   chromium
   colmap
