@@ -198,6 +198,7 @@ StreamingDepthStats StreamingDepth::Run(FrameSource& frames, const DepthPlan& pl
       sparse[s] = PackedDepthMap::Pack(estimator.Estimate(reference, nbs, volume_));
       sparse_bytes += sparse[s].Bytes();
       stats.seconds_sparse += timer.Seconds();
+      stats.cpu_seconds_sparse += timer.CpuSeconds();
       ++stats.sparse_maps;
     }
     stats.max_sparse_held = std::max(stats.max_sparse_held, static_cast<int>(sparse.size()));
@@ -214,6 +215,7 @@ StreamingDepthStats StreamingDepth::Run(FrameSource& frames, const DepthPlan& pl
             [&](int v) -> const PinholeView& { return views_[v]; });
         filtered = grid->Filter(own, views_[i]);
         stats.seconds_filter += timer.Seconds();
+        stats.cpu_seconds_filter += timer.CpuSeconds();
         ++stats.filtered_maps;
       }
       sink(i, ExpandFrame(wanted_frames.at(i)), own, filtered);

@@ -46,6 +46,8 @@ struct StreamingDepthStats {
   long long neighbors_used = 0;  // summed over the sparse maps (the views each one's hierarchy used)
   double seconds_sparse = 0;
   double seconds_filter = 0;
+  double cpu_seconds_sparse = 0;  // process CPU (all threads) during the same sections
+  double cpu_seconds_filter = 0;
 };
 
 class ViewGraph;

@@ -235,6 +235,7 @@ PipelineResult EmbeddedPipeline::Run(FrameSource& frames) {
           }
           fused_map = DensifyNeighbourByNeighbour(propagator, reference, nbs, base, volume_, go);
           st.seconds_densify += t.Seconds();
+          st.cpu_densify += t.CpuSeconds();
           for (int j : plan.PhotoNeighbours(i))
             if (--refcount[j] == 0) window.erase(j);
           if (--refcount[i] == 0) window.erase(i);
@@ -252,6 +253,7 @@ PipelineResult EmbeddedPipeline::Run(FrameSource& frames) {
         else
           fusion.Integrate(views_[i], fused_map, i);
         st.seconds_fusion += t.Seconds();
+        st.cpu_fusion += t.CpuSeconds();
         if (write && options_.write_depth) {
           const std::string stem = names_.empty() ? DefaultStem(i) : fs::path(names_[i]).stem().string();
           WritePfm(options_.out_dir / "depth" / (stem + ".pfm"), fused_map.depth);
@@ -276,6 +278,8 @@ PipelineResult EmbeddedPipeline::Run(FrameSource& frames) {
   st.max_frames_pending_depth = ds.max_pending_frames;
   st.seconds_sparse = ds.seconds_sparse;
   st.seconds_filter = ds.seconds_filter;
+  st.cpu_sparse = ds.cpu_seconds_sparse;
+  st.cpu_filter = ds.cpu_seconds_filter;
   const FusionStats fs_stats = fusion.Stats();
   st.active_voxels = fs_stats.active_voxels;
   st.grid_bytes = fs_stats.grid_bytes;
@@ -294,6 +298,8 @@ PipelineResult EmbeddedPipeline::Run(FrameSource& frames) {
   });
   result.mesh_raw = fusion.ExtractMesh(mo);
   st.seconds_mesh = tm.Seconds();
+  st.cpu_mesh = tm.CpuSeconds();
+  const Timer tf;
   st.carving_frames = static_cast<int>(carve_views.size());
   st.color_frames = static_cast<int>(color_views.size());
   // Refine, fall back to the fused surface, colour: as the service's refined export.
@@ -304,6 +310,7 @@ PipelineResult EmbeddedPipeline::Run(FrameSource& frames) {
   st.refine = finished.refine;
   st.seconds_refine = finished.seconds_refine;
   st.seconds_color = finished.seconds_color;
+  st.cpu_finish = tf.CpuSeconds();
   st.mesh_vertices = result.mesh.vertices.size();
   st.mesh_triangles = result.mesh.triangles.size();
   spdlog::info("run: {} of {} active voxels have H >= {}", st.voxels_above_threshold, st.active_voxels, iso);
@@ -322,7 +329,9 @@ PipelineResult EmbeddedPipeline::Run(FrameSource& frames) {
     }
   }
   st.seconds_write = tw.Seconds();
+  st.cpu_write = tw.CpuSeconds();
   st.seconds_total = total.Seconds();
+  st.cpu_total = total.CpuSeconds();
   st.peak_rss_bytes = PeakRssBytes();
 
   const auto& po = options_.propagation;
@@ -349,6 +358,17 @@ PipelineResult EmbeddedPipeline::Run(FrameSource& frames) {
         {"color", st.seconds_color},
         {"write", st.seconds_write},
         {"total", st.seconds_total}}},
+      // Process CPU (user + system, every thread) of the same stages; their
+      // sum is below "total" by what runs outside them (reading, planning).
+      {"cpu_seconds",
+       {{"depth_sparse", st.cpu_sparse},
+        {"depth_filter", st.cpu_filter},
+        {"densify", st.cpu_densify},
+        {"fusion", st.cpu_fusion},
+        {"mesh", st.cpu_mesh},
+        {"refine_and_color", st.cpu_finish},
+        {"write", st.cpu_write},
+        {"total", st.cpu_total}}},
       {"peak_rss_bytes", st.peak_rss_bytes},
       {"counts",
        {{"frames_read", st.frames_read},

@@ -46,6 +46,9 @@ struct PipelineStats {
   double seconds_sparse = 0, seconds_filter = 0, seconds_densify = 0, seconds_fusion = 0;
   double seconds_mesh = 0, seconds_color = 0, seconds_write = 0, seconds_total = 0;
   double seconds_refine = 0;  // carving + Poisson (their split is in `refine`)
+  // Process CPU seconds (user + system, every thread) of the same stages.
+  double cpu_sparse = 0, cpu_filter = 0, cpu_densify = 0, cpu_fusion = 0;
+  double cpu_mesh = 0, cpu_finish = 0, cpu_write = 0, cpu_total = 0;  // finish: refine + colour
   int carving_frames = 0;
   RefineStats refine;  // when options.refine
   std::int64_t peak_rss_bytes = 0;

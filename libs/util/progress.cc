@@ -2,7 +2,15 @@
 
 #include <spdlog/spdlog.h>
 
+#include <ctime>
+
 namespace lfrecon {
+
+double ProcessCpuSeconds() {
+  timespec ts{};
+  if (clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &ts) != 0) return 0.0;
+  return static_cast<double>(ts.tv_sec) + 1e-9 * static_cast<double>(ts.tv_nsec);
+}
 
 Progress::Progress(std::string task, long long total, double interval_s)
     : task_(std::move(task)), total_(total), interval_s_(interval_s) {

@@ -31,17 +31,26 @@ class Progress {
   bool finished_ = false;
 };
 
-// Wall-clock stopwatch.
+// The process's CPU time so far (user + system, all threads), seconds.
+double ProcessCpuSeconds();
+
+// Stopwatch: wall-clock seconds, and the process's CPU seconds (every thread,
+// so a parallel stage counts all its cores) since it started.
 class Timer {
  public:
-  Timer() : start_(std::chrono::steady_clock::now()) {}
-  void Restart() { start_ = std::chrono::steady_clock::now(); }
+  Timer() : start_(std::chrono::steady_clock::now()), cpu_start_(ProcessCpuSeconds()) {}
+  void Restart() {
+    start_ = std::chrono::steady_clock::now();
+    cpu_start_ = ProcessCpuSeconds();
+  }
   double Seconds() const {
     return std::chrono::duration<double>(std::chrono::steady_clock::now() - start_).count();
   }
+  double CpuSeconds() const { return ProcessCpuSeconds() - cpu_start_; }
 
  private:
   std::chrono::steady_clock::time_point start_;
+  double cpu_start_;
 };
 
 }  // namespace lfrecon

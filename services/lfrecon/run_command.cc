@@ -18,6 +18,7 @@
 #include "poses/pose_refinement.h"
 #include "run_outputs.h"
 #include "util/error.h"
+#include "util/progress.h"
 
 namespace lfrecon::cli {
 namespace fs = std::filesystem;
@@ -88,7 +89,9 @@ int RunPipeline(const RunArgs& args) {
   spdlog::info("run: dataset {} ({} views, poses from {}, V from {})",
                ds.root().empty() ? std::string("(explicit sources)") : ds.root().string(), ds.NumViews(),
                ds.pose_source(), ds.bbox_source());
+  const Timer whole;  // pose refinement + pipeline: what the frames/s line below divides by
   if (!args.no_refine_poses) {
+    const Timer tr;
     // A pass over the frames before the pipeline's own: the poses every stage uses come from it.
     auto frames = ds.OpenFrames();
     const PoseRefinementResult pr = RefinePoses(*frames, views, PoseRefinementOptions{});
@@ -103,6 +106,7 @@ int RunPipeline(const RunArgs& args) {
                    {"median_center_change", ps.median_center_change},
                    {"scene_distance", ps.scene_distance},
                    {"seconds", ps.seconds_tracking + ps.seconds_solve},
+                   {"cpu_seconds", tr.CpuSeconds()},
                    {"converged", ps.converged}};
     if (!args.out.empty()) WriteRefinedModel(ds, views, args.out / "sparse_refined");
   }
@@ -119,6 +123,10 @@ int RunPipeline(const RunArgs& args) {
             << s.mesh_triangles << " triangles) from " << s.views << " views at " << 1000 * s.voxel_size
             << " mm voxels in " << s.seconds_total << " s, peak RSS " << s.peak_rss_bytes / 1048576 << " MiB; "
             << "report " << (args.out / "report.json").string() << "\n";
+  const double wall = whole.Seconds();
+  std::cout << "run: " << ds.NumViews() << " frames in " << wall << " s ("
+            << (wall > 0 ? ds.NumViews() / wall : 0.0) << " frames/s), " << whole.CpuSeconds()
+            << " CPU-s (user + system)\n";
   return 0;
 }
 

@@ -133,6 +133,14 @@ TEST(EmbeddedPipeline, SphereLoopReachesFScoreAtTwoVoxels) {
   EXPECT_EQ(report["views"]["processed"].get<int>(), frames);
   EXPECT_GT(report["peak_rss_bytes"].get<long long>(), 0);
   EXPECT_NEAR(report["voxel_size"].get<double>(), options.voxel_size, 1e-12);
+  // CPU-s per stage: the process's CPU during each stage, at least its share of the total.
+  const nlohmann::json& cpu = report["cpu_seconds"];
+  EXPECT_GT(cpu["depth_sparse"].get<double>(), 0.0);
+  double stages = 0;
+  for (const char* k : {"depth_sparse", "depth_filter", "densify", "fusion", "mesh", "refine_and_color", "write"})
+    stages += cpu[k].get<double>();
+  EXPECT_LE(stages, cpu["total"].get<double>() + 1e-6);
+  EXPECT_GT(cpu["total"].get<double>(), 0.5 * report["seconds"]["depth_sparse"].get<double>());
   EXPECT_GE(run.metrics.scores[0].fscore, EnvDouble("LFRECON_PIPE_MIN_F", 0.8));
   fs::remove_all(out);
 }
