@@ -31,8 +31,6 @@ void FusionOptions::CheckModel() const {
   LFRECON_CHECK_OPTION(activation_step > 0 && activation_step <= 2);
   LFRECON_CHECK_OPTION(activation_min_confidence >= 0 && activation_min_confidence <= 1);
   LFRECON_CHECK_OPTION(prune_every >= 0);
-  LFRECON_CHECK_OPTION(background_floor >= 0 && background_floor <= 1);
-  LFRECON_CHECK_OPTION(std::isfinite(background_gate_px) && background_gate_px >= 0);
   LFRECON_CHECK_OPTION(prune_below > 0 && prune_below <= surface_threshold);
   LFRECON_CHECK_OPTION(store_max_block >= 1 && store_max_block <= 1024 && (store_max_block & (store_max_block - 1)) == 0);
 }

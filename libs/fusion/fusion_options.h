@@ -42,34 +42,6 @@ struct FusionOptions {
   // exact and on noisy (±1 voxel) depth; larger values tolerate depth maps
   // that are biased long. Negative: eq. 11 literally.
   double free_space_margin = 0.0;
-  // Background free space (ours): a background depth (label kBackground, or
-  // without labels a point outside V) at least background_gate_px pixels from
-  // every foreground depth of its map gets confidence at least
-  // background_floor. Why: dense background confidence is |C'_fg - C'_bg| of
-  // the propagation (§4), near 0 wherever the background has little texture
-  // (sand, a plain wall), so the views that see space around the object as
-  // background hardly vote for free space and halos or fins that other views'
-  // maps put there survive. Far from the foreground, "this ray reaches the
-  // background" is certain even where the background's depth is not; within a
-  // few pixels of it the labels are not (a thin stick a view's map missed is
-  // background there), so those pixels keep their own confidence: the gate.
-  // 0: off (the library default). fusion_from_depth_bench --bg-confidence-floor
-  // 0.05 --bg-floor-gate G (fused mesh, F@5mm / P@5mm / thin recall@5mm):
-  //   G               off               4 px              6 px              8 px
-  //   figurines       0.679/0.726/0.857 0.704/0.777/0.858 0.698/0.767/0.857 0.692/0.755/0.857
-  //   demo (320 px)   0.834/0.863/0.416 0.836/0.872/0.378 0.841/0.871/0.466 0.840/0.868/0.470
-  // (no gate: figurines 0.719/0.794/0.880 but the demo's sticks go, thin 0.046).
-  // Those bench maps carry no labels (background = outside V), which is what
-  // WithGatedBackgroundFloor raises. In `lfrecon run` with it on (0.05, 6 px)
-  // the generated sets' thin parts went (tabletop thin recall 0.403 -> 0.174,
-  // thin-degraded F@5mm 0.634 -> 0.329) while it raised background-labelled
-  // depths inside V too. Raising only rays that pass V (as now), tabletop
-  // recovers (F@5mm 0.865, thin 0.409) but thin-degraded stays 0.329: a lone
-  // rod a view's map misses has no foreground within the gate, so every such
-  // view carves it. Off in PipelineOptions (docs/benchmarks.md "Where the
-  // figurines' precision goes").
-  double background_floor = 0.0;
-  double background_gate_px = 6.0;
   // Nearest: on exact depth slightly more accurate than bilinear (synthetic
   // sphere/box median error 0.5 vs 0.8 mm at 4 mm voxels; figurines F@2mm
   // 0.801 vs 0.800) and cheaper.

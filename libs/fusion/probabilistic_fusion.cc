@@ -234,7 +234,7 @@ int ProbabilisticFusion::NumViews() const { return static_cast<int>(impl_->views
 bool ProbabilisticFusion::HasView(int view_id) const { return impl_->view_ids.count(view_id) > 0; }
 
 DepthMap WithGatedBackgroundFloor(const DepthMap& map, const PinholeView& view, const BoundingBox& volume,
-                                  double floor, double gate_px) {
+                                  double floor, double gate_px, const cv::Mat& protect) {
   if (!(floor > 0) || map.depth.empty()) return map;
   DepthMap out;
   out.depth = map.depth;
@@ -262,6 +262,7 @@ DepthMap WithGatedBackgroundFloor(const DepthMap& map, const PinholeView& view, 
   cv::Mat dist;  // pixels to the nearest foreground depth
   if (gate_px > 0) {
     cv::Mat not_fg = kind != 0;  // 255 where not foreground
+    if (protect.size() == kind.size()) not_fg.setTo(0, protect);
     cv::distanceTransform(not_fg, dist, cv::DIST_L2, cv::DIST_MASK_PRECISE);
   }
   const float f = static_cast<float>(floor), g = static_cast<float>(gate_px);
@@ -285,11 +286,7 @@ bool ProbabilisticFusion::Integrate(const PinholeView& view, const DepthMap& inp
                                 std::to_string(input.depth.rows) + ", its view " + std::to_string(view.width) + "x" +
                                 std::to_string(view.height));
   Impl& m = *impl_;
-  const DepthMap floored = m.options.background_floor > 0
-                               ? WithGatedBackgroundFloor(input, view, m.options.volume, m.options.background_floor,
-                                                          m.options.background_gate_px)
-                               : DepthMap();
-  const DepthMap& depth = m.options.background_floor > 0 ? floored : input;
+  const DepthMap& depth = input;
   auto compact = std::make_unique<CompactDepthView>(view, depth, m.options.volume);
 
   Timer timer;

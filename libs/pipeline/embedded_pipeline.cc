@@ -24,27 +24,19 @@
 namespace lfrecon {
 namespace fs = std::filesystem;
 
-DepthMap WithBackgroundConfidenceFloor(const DepthMap& map, const PinholeView& view, const BoundingBox& volume,
-                                       double floor) {
-  DepthMap out;
-  out.depth = map.depth;
-  out.label = map.label;
-  out.confidence = map.confidence.empty() ? cv::Mat(map.depth.size(), CV_32F, cv::Scalar(1)) : map.confidence.clone();
-  if (!(floor > 0)) return out;
-  const bool labels = !map.label.empty();
-  const auto f = static_cast<float>(floor);
-  for (int r = 0; r < out.depth.rows; ++r) {
-    const float* d = out.depth.ptr<float>(r);
-    float* c = out.confidence.ptr<float>(r);
-    const std::uint8_t* l = labels ? out.label.ptr<std::uint8_t>(r) : nullptr;
-    for (int col = 0; col < out.depth.cols; ++col) {
-      if (!(d[col] > 0) || c[col] >= f) continue;
-      const bool background = labels ? l[col] == static_cast<std::uint8_t>(DepthLabel::kBackground)
-                                     : !volume.Contains(view.Unproject(Eigen::Vector2d(col + 0.5, r + 0.5), d[col]));
-      if (background) c[col] = f;
-    }
-  }
-  return out;
+bool NeedsBackgroundFloor(const PipelineOptions& options) {
+  return options.densify && options.background_floor.floor > 0;
+}
+
+DepthMap WithBackgroundFloor(const DepthMap& dense, const DepthMap& sparse, const PinholeView& view,
+                             const BoundingBox& volume, const PipelineOptions& options) {
+  if (!NeedsBackgroundFloor(options)) return dense;
+  const PipelineOptions::BackgroundFloor& bf = options.background_floor;
+  cv::Mat protect;  // sparse depths inside V: a thin part this view's dense map may have lost
+  if (bf.gate_on_sparse && sparse.depth.size() == dense.depth.size())
+    protect = DepthPropagator::LabelFromVolume(view, sparse, volume).label ==
+              static_cast<std::uint8_t>(DepthLabel::kForeground);
+  return WithGatedBackgroundFloor(dense, view, volume, bf.floor, bf.gate_px, protect);
 }
 
 EmbeddedPipeline::EmbeddedPipeline(std::vector<PinholeView> views, const BoundingBox& volume,
@@ -245,11 +237,8 @@ PipelineResult EmbeddedPipeline::Run(FrameSource& frames) {
         }
         st.fused_pixels += fused_map.CountValid();
         Timer t;
-        if (options_.densify && options_.background_confidence_floor > 0)
-          fusion.Integrate(views_[i],
-                           WithBackgroundConfidenceFloor(fused_map, views_[i], volume_,
-                                                         options_.background_confidence_floor),
-                           i);
+        if (NeedsBackgroundFloor(options_))
+          fusion.Integrate(views_[i], WithBackgroundFloor(fused_map, sparse, views_[i], volume_, options_), i);
         else
           fusion.Integrate(views_[i], fused_map, i);
         st.seconds_fusion += t.Seconds();
@@ -398,7 +387,10 @@ PipelineResult EmbeddedPipeline::Run(FrameSource& frames) {
         {"surface_threshold", mo.threshold < 0 ? fo.surface_threshold : mo.threshold},
         {"sigma_v", fo.sigma_v},
         {"sigma_s", fo.sigma_s},
-        {"background_confidence_floor", options_.densify ? options_.background_confidence_floor : 0.0},
+        {"background_floor",
+         {{"floor", options_.densify ? options_.background_floor.floor : 0.0},
+          {"gate_px", options_.background_floor.gate_px},
+          {"gate_on_sparse", options_.background_floor.gate_on_sparse}}},
         {"activation_min_confidence", fo.activation_min_confidence},
         {"probability_clamp", fo.probability_clamp},
         {"band", fo.band},

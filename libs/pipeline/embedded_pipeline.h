@@ -83,11 +83,15 @@ class EmbeddedPipeline {
   std::function<void(int, int, int)> view_callback_;
 };
 
-// `map` with the confidence of its background depths raised to at least
-// `floor` (PipelineOptions::background_confidence_floor): pixels with a depth
-// > 0 labelled background, or, without labels, whose point lies outside V.
-DepthMap WithBackgroundConfidenceFloor(const DepthMap& map, const PinholeView& view, const BoundingBox& volume,
-                                       double floor);
 
+
+// What the fusion integrates for a view, in `lfrecon run` and in the service's
+// aggregator alike: its dense map with PipelineOptions::background_floor
+// applied (`sparse`: the view's sparse map of §3.1, for gate_on_sparse; empty
+// if not at hand). NeedsBackgroundFloor: whether it changes anything (else the
+// sparse map need not be read).
+bool NeedsBackgroundFloor(const PipelineOptions& options);
+DepthMap WithBackgroundFloor(const DepthMap& dense, const DepthMap& sparse, const PinholeView& view,
+                             const BoundingBox& volume, const PipelineOptions& options);
 
 }  // namespace lfrecon

@@ -23,8 +23,10 @@ void PipelineOptions::Check() const {
   FusionOptions fo = fusion;
   if (densify) fo.sigma_s = dense_sigma_s;
   fo.CheckModel();
-  if (!(background_confidence_floor >= 0 && background_confidence_floor <= 1))
-    throw OptionError("background_confidence_floor must be in [0, 1]");
+  if (!(background_floor.floor >= 0 && background_floor.floor <= 1))
+    throw OptionError("background_floor.floor must be in [0, 1]");
+  if (!(std::isfinite(background_floor.gate_px) && background_floor.gate_px >= 0))
+    throw OptionError("background_floor.gate_px must be finite and >= 0");
 }
 
 double PipelineVoxelSize(const BoundingBox& volume, const PipelineOptions& options) {

@@ -67,11 +67,7 @@ struct PipelineOptions {
     FusionOptions f;
     f.activation_min_confidence = 0.01;
     f.probability_clamp = 0.03;
-    // FusionOptions::background_floor stays off: with 0.05 (gate 6 px) the
-    // full pipeline lost the generated sets' thin parts (quality table,
-    // 2026-12-02: tabletop thin recall 0.403 -> 0.174, thin-degraded F@5mm
-    // 0.634 -> 0.329; 0.329 still with only rays through V raised) although
-    // the figurines gained (F@5mm 0.787 -> 0.815); see FusionOptions::background_floor.
+    // The background free-space floor is background_floor below (not the fusion's).
     return f;
   }();
   // σ_s of eq. 12-13 used instead of fusion.sigma_s when the maps are dense:
@@ -81,20 +77,36 @@ struct PipelineOptions {
   // (180 views, 4 mm voxels) F@8mm is 0.974 / 0.989 / 0.965 / 0.828 / 0.551 /
   // 0 for σ_s 0.1 / 0.15 / 0.2 / 0.3 / 0.4 / 0.7.
   double dense_sigma_s = 0.15;
-  // Dense maps only: background depths (label background, or no label and the
-  // point outside V) get at least this confidence before fusion. The dense
-  // confidence |C'_fg - C'_bg| of background pixels is mostly 0.002-0.05 (the
-  // background has few sparse depths to propagate), and with σ_s 0.15 a voxel
-  // whose views say "free" with c > -0.016 on average stays above H = 0.2, so
-  // spurious surface in front of the background (smeared silhouettes, depth
-  // outliers) survives. Measured with fusion_from_depth_bench
-  // --bg-confidence-floor, F@5mm / P@5mm / thin recall@5mm of the fused mesh:
-  //   floor      0                  0.03               0.06
-  //   figurines  0.647/0.701/0.685  0.679/0.745/0.697  -
-  //   demo       0.808/0.864/0.403  0.743/0.842/0.050  0.703/0.847/0.032
-  // Off by default: the demo's thin sticks are background in most of their
-  // views' dense maps, and a floor carves them away.
-  double background_confidence_floor = 0;
+  // Background free space (ours), dense maps only: before fusion, background
+  // depths whose ray passes V (WithGatedBackgroundFloor) at least gate_px
+  // pixels from every foreground depth of the dense map get confidence at
+  // least `floor`. Why: the dense background confidence |C'_fg - C'_bg| (§4) is
+  // ~0.002-0.05 wherever the background has little texture, and with σ_s 0.15
+  // a voxel whose views say "free" that weakly stays above H = 0.2, so the
+  // halo that the propagation puts over plain background next to the object
+  // (a quarter of the figurines' dense foreground depths lie > 4 cm in front of
+  // the truth; docs/benchmarks.md "Where the figurines' precision goes")
+  // survives in the mesh. Within the gate the labels are not trusted: a thin
+  // part a view's dense map missed is background there.
+  // gate_on_sparse: pixels near a depth of the view's *sparse* map (§3.1,
+  // before the filter) that lies inside V also gate, so a thin part whose
+  // sparse depths the filter or the propagation lost in this view is not carved
+  // by it. Quality table, 0.05 / 6 px (F@5mm / thin recall@5mm):
+  //   set                 off            gate on dense only   + gate_on_sparse
+  //   figurines           0.787 / 0.853  0.815 / -            0.810 / 0.854
+  //   thin-degraded       0.634 / 0.452  0.329 / 0.184        0.634 / 0.452
+  //   tabletop-degraded   0.830 / 0.233  0.841 / 0.320        0.830 / 0.233
+  //   tabletop            0.863 / 0.403  0.865 / 0.409        0.863 / 0.403
+  //   figurines-noisy     0.781 / 0.786  -                    0.792 / 0.785
+  //   occlusion-degraded  0.920 / -      -                    0.920 / -
+  // (docs/benchmarks.md). Off by default for now: turning it on changes every
+  // default mesh, and that wants the integration tests and a CI run first
+  // (the service applies the same WithBackgroundFloor, embedded_pipeline.h).
+  struct BackgroundFloor {
+    double floor = 0;  // 0: off
+    double gate_px = 6.0;
+    bool gate_on_sparse = true;
+  } background_floor;
   // Voxel edge in metres; <= 0: the longest side of V / voxel_divisions.
   double voxel_size = 0;
   int voxel_divisions = 256;

@@ -9,6 +9,7 @@
 #include <sstream>
 
 #include "io/ply.h"
+#include "pipeline/embedded_pipeline.h"
 #include "util/error.h"
 #include "util/progress.h"
 
@@ -162,6 +163,16 @@ void Aggregator::FusionLoop(Job* jp) const {
         std::lock_guard<std::mutex> lk(job.queue_mu);
         job.unreadable.push_back(v);
         continue;
+      }
+      if (NeedsBackgroundFloor(job.geo.options)) {  // as lfrecon run: the same function on the same maps
+        DepthMap sparse;
+        try {
+          sparse = store_.ReadMap(id, pb::MAP_SPARSE, v, job.geo.views[v]);
+        } catch (const InputError& e) {  // the floor is then gated by the dense map alone
+          spdlog::warn("aggregate: job {}: sparse map of view {} unreadable ({}): background floor gated without it",
+                       id, v, e.what());
+        }
+        map = WithBackgroundFloor(map, sparse, job.geo.views[v], job.geo.volume, job.geo.options);
       }
       {
         std::lock_guard<std::mutex> grid(job.grid_mu);

@@ -644,7 +644,7 @@ int main(int argc, char** argv) {
     std::printf("measured background floor %.3f: %zu measured background pixels, %zu raised\n", measured_floor,
                 measured, raised);
   }
-  if (bg_floor > 0) {  // depths beyond V (background) get at least this confidence: FusionOptions::background_floor
+  if (bg_floor > 0) {  // depths beyond V (background) get at least this confidence: PipelineOptions::background_floor without its sparse gate
     std::size_t raised = 0;
     for (std::size_t k = 0; k < maps.size(); ++k) {
       if (maps[k].confidence.empty()) continue;

@@ -523,6 +523,15 @@ TEST(GatedBackgroundFloor, RaisesOnlyBackgroundFarFromTheForeground) {
   EXPECT_FLOAT_EQ(tout.confidence.at<float>(0, 15), 0.01f);
   EXPECT_FLOAT_EQ(tout.confidence.at<float>(0, 10), 0.01f) << "5 px from the depth inside V";
   EXPECT_FLOAT_EQ(tout.confidence.at<float>(0, 8), 0.05f) << "6 px from both";
+  // `protect` pixels gate like foreground (the sparse depths inside V that the
+  // pipeline passes), whatever the dense map says there.
+  cv::Mat protect = cv::Mat::zeros(1, 20, CV_8U);
+  protect.at<std::uint8_t>(0, 16) = 255;
+  const DepthMap pout = WithGatedBackgroundFloor(m, PinholeView(), V, 0.05, 6.0, protect);
+  EXPECT_FLOAT_EQ(pout.confidence.at<float>(0, 9), 0.05f) << "7 px from the foreground and from the protected pixel";
+  EXPECT_FLOAT_EQ(pout.confidence.at<float>(0, 11), 0.01f) << "5 px from the protected pixel";
+  EXPECT_FLOAT_EQ(pout.confidence.at<float>(0, 16), 0.01f) << "the protected pixel itself";
+  EXPECT_FLOAT_EQ(pout.confidence.at<float>(0, 18), 0.01f);
 }
 
 }  // namespace

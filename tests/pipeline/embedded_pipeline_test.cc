@@ -217,42 +217,40 @@ TEST(EmbeddedPipeline, VoxelSizeFromVolumeAndBadOptions) {
   o.voxel_size = -1;
   EXPECT_THROW(EmbeddedPipeline({}, V, o), OptionError);
   o.voxel_size = 0;
-  o.background_confidence_floor = 1.5;
+  o.background_floor.floor = 1.5;
+  EXPECT_THROW(EmbeddedPipeline({}, V, o), OptionError);
+  o.background_floor.floor = 0.05;
+  o.background_floor.gate_px = -1;
   EXPECT_THROW(EmbeddedPipeline({}, V, o), OptionError);
 }
 
-// Background depths (by label, or without labels outside V) get at least the
-// floor; foreground depths, pixels without depth and strong confidences keep theirs.
-TEST(EmbeddedPipeline, BackgroundConfidenceFloor) {
-  PinholeView view;  // camera at the origin looking along +z, 4x1 pixels
-  view.width = 4;
+
+// The background floor the fusion gets (PipelineOptions::background_floor):
+// off by default; on, background depths far from the foreground are raised,
+// except near a sparse depth inside V (a thin part the dense map lost).
+TEST(EmbeddedPipeline, BackgroundFloorGatedBySparseDepths) {
+  PinholeView view;  // 20x1 pixels looking along +z
+  view.width = 20;
   view.height = 1;
-  view.K << 2, 0, 2, 0, 2, 0.5, 0, 0, 1;
-  BoundingBox V;
-  V.min = {-1, -1, 0.5};
-  V.max = {1, 1, 1.5};
-  DepthMap m(1, 4);
-  const float depth[4] = {1.0f, 3.0f, 0.0f, 3.0f}, conf[4] = {0.01f, 0.01f, 0.01f, 0.2f};
-  for (int c = 0; c < 4; ++c) {
-    m.depth.at<float>(0, c) = depth[c];
-    m.confidence.at<float>(0, c) = conf[c];
-  }
-  DepthMap unlabelled = m;
-  unlabelled.label = cv::Mat();
-  const DepthMap a = WithBackgroundConfidenceFloor(unlabelled, view, V, 0.05);
-  EXPECT_FLOAT_EQ(a.confidence.at<float>(0, 0), 0.01f);  // inside V: foreground
-  EXPECT_FLOAT_EQ(a.confidence.at<float>(0, 1), 0.05f);  // beyond V: background, raised
-  EXPECT_FLOAT_EQ(a.confidence.at<float>(0, 2), 0.01f);  // no depth
-  EXPECT_FLOAT_EQ(a.confidence.at<float>(0, 3), 0.2f);   // already above the floor
-  EXPECT_FLOAT_EQ(unlabelled.confidence.at<float>(0, 1), 0.01f) << "the input is not changed";
-  // With labels, the label decides.
-  for (int c = 0; c < 4; ++c) m.label.at<std::uint8_t>(0, c) = static_cast<std::uint8_t>(DepthLabel::kBackground);
-  m.label.at<std::uint8_t>(0, 1) = static_cast<std::uint8_t>(DepthLabel::kForeground);
-  const DepthMap b = WithBackgroundConfidenceFloor(m, view, V, 0.05);
-  EXPECT_FLOAT_EQ(b.confidence.at<float>(0, 0), 0.05f);
-  EXPECT_FLOAT_EQ(b.confidence.at<float>(0, 1), 0.01f);
-  EXPECT_FLOAT_EQ(b.confidence.at<float>(0, 2), 0.01f);
-  EXPECT_FLOAT_EQ(WithBackgroundConfidenceFloor(m, view, V, 0).confidence.at<float>(0, 0), 0.01f);
+  view.K << 2, 0, 10, 0, 2, 0.5, 0, 0, 1;
+  const BoundingBox V{Eigen::Vector3d(-100, -100, 0.5), Eigen::Vector3d(100, 100, 1.5)};
+  DepthMap dense(1, 20), sparse(1, 20);
+  dense.depth.setTo(3.0f);  // every ray reaches the background beyond V
+  dense.confidence.setTo(0.01f);
+  dense.label.setTo(static_cast<std::uint8_t>(DepthLabel::kBackground));
+  sparse.depth.at<float>(0, 10) = 1.0f;  // inside V
+  PipelineOptions o;
+  EXPECT_FALSE(NeedsBackgroundFloor(o)) << "off by default";
+  EXPECT_FLOAT_EQ(WithBackgroundFloor(dense, sparse, view, V, o).confidence.at<float>(0, 0), 0.01f);
+  o.background_floor.floor = 0.05;
+  ASSERT_TRUE(NeedsBackgroundFloor(o));
+  const DepthMap gated = WithBackgroundFloor(dense, sparse, view, V, o);
+  EXPECT_FLOAT_EQ(gated.confidence.at<float>(0, 0), 0.05f) << "10 px from the sparse depth";
+  EXPECT_FLOAT_EQ(gated.confidence.at<float>(0, 10), 0.01f) << "at the sparse depth inside V";
+  EXPECT_FLOAT_EQ(gated.confidence.at<float>(0, 14), 0.01f) << "4 px from it";
+  o.background_floor.gate_on_sparse = false;
+  EXPECT_FLOAT_EQ(WithBackgroundFloor(dense, sparse, view, V, o).confidence.at<float>(0, 10), 0.05f);
+  EXPECT_FLOAT_EQ(WithBackgroundFloor(dense, DepthMap(), view, V, o).confidence.at<float>(0, 10), 0.05f);
 }
 
 }  // namespace
