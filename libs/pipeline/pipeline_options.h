@@ -99,11 +99,10 @@ struct PipelineOptions {
   //   tabletop            0.863 / 0.403  0.865 / 0.409        0.863 / 0.403
   //   figurines-noisy     0.781 / 0.786  -                    0.792 / 0.785
   //   occlusion-degraded  0.920 / -      -                    0.920 / -
-  // (docs/benchmarks.md). Off by default for now: turning it on changes every
-  // default mesh, and that wants the integration tests and a CI run first
-  // (the service applies the same WithBackgroundFloor, embedded_pipeline.h).
+  // (docs/benchmarks.md). On by default; the service applies the same
+  // WithBackgroundFloor (embedded_pipeline.h) to the stored maps.
   struct BackgroundFloor {
-    double floor = 0;  // 0: off
+    double floor = 0.05;  // 0: off
     double gate_px = 6.0;
     bool gate_on_sparse = true;
   } background_floor;

@@ -226,8 +226,8 @@ TEST(EmbeddedPipeline, VoxelSizeFromVolumeAndBadOptions) {
 
 
 // The background floor the fusion gets (PipelineOptions::background_floor):
-// off by default; on, background depths far from the foreground are raised,
-// except near a sparse depth inside V (a thin part the dense map lost).
+// on by default (0.05 at 6 px); background depths far from the foreground are
+// raised, except near a sparse depth inside V (a thin part the dense map lost).
 TEST(EmbeddedPipeline, BackgroundFloorGatedBySparseDepths) {
   PinholeView view;  // 20x1 pixels looking along +z
   view.width = 20;
@@ -240,10 +240,13 @@ TEST(EmbeddedPipeline, BackgroundFloorGatedBySparseDepths) {
   dense.label.setTo(static_cast<std::uint8_t>(DepthLabel::kBackground));
   sparse.depth.at<float>(0, 10) = 1.0f;  // inside V
   PipelineOptions o;
-  EXPECT_FALSE(NeedsBackgroundFloor(o)) << "off by default";
+  o.background_floor.floor = 0;
+  EXPECT_FALSE(NeedsBackgroundFloor(o)) << "0: off";
   EXPECT_FLOAT_EQ(WithBackgroundFloor(dense, sparse, view, V, o).confidence.at<float>(0, 0), 0.01f);
-  o.background_floor.floor = 0.05;
-  ASSERT_TRUE(NeedsBackgroundFloor(o));
+  o = PipelineOptions();
+  ASSERT_TRUE(NeedsBackgroundFloor(o)) << "on by default";
+  EXPECT_DOUBLE_EQ(o.background_floor.floor, 0.05);
+  EXPECT_DOUBLE_EQ(o.background_floor.gate_px, 6.0);
   const DepthMap gated = WithBackgroundFloor(dense, sparse, view, V, o);
   EXPECT_FLOAT_EQ(gated.confidence.at<float>(0, 0), 0.05f) << "10 px from the sparse depth";
   EXPECT_FLOAT_EQ(gated.confidence.at<float>(0, 10), 0.01f) << "at the sparse depth inside V";
