@@ -564,6 +564,16 @@ pb::JobManifest MakeManifest(const std::string& id, const pb::JobSpec& spec, con
   return m;
 }
 
+std::optional<BoundingBox> SpecVolume(const pb::JobSpec& spec) {
+  if (spec.bbox_size() == 0) return std::nullopt;
+  if (spec.bbox_size() != 6) throw OptionError("bbox needs 6 numbers, got " + std::to_string(spec.bbox_size()));
+  BoundingBox b;
+  b.min = Eigen::Vector3d(spec.bbox(0), spec.bbox(1), spec.bbox(2));
+  b.max = Eigen::Vector3d(spec.bbox(3), spec.bbox(4), spec.bbox(5));
+  if (!b.IsValid()) throw OptionError("bbox: each max must be greater than its min");
+  return b;
+}
+
 DatasetOptions ToDatasetOptions(const pb::JobSpec& spec) {
   DatasetOptions d;
   d.dataset_dir = spec.dataset_dir();
@@ -572,14 +582,7 @@ DatasetOptions ToDatasetOptions(const pb::JobSpec& spec) {
   d.colmap_dir = spec.colmap_dir();
   d.transforms_path = spec.transforms_path();
   d.max_image_size = static_cast<int>(std::min<std::uint32_t>(spec.max_image_size(), 1u << 20));
-  if (spec.bbox_size() != 0) {
-    if (spec.bbox_size() != 6) throw OptionError("bbox needs 6 numbers, got " + std::to_string(spec.bbox_size()));
-    BoundingBox b;
-    b.min = Eigen::Vector3d(spec.bbox(0), spec.bbox(1), spec.bbox(2));
-    b.max = Eigen::Vector3d(spec.bbox(3), spec.bbox(4), spec.bbox(5));
-    if (!b.IsValid()) throw OptionError("bbox: each max must be greater than its min");
-    d.bbox = b;
-  }
+  if (const std::optional<BoundingBox> b = SpecVolume(spec)) d.bbox = *b;
   d.Check();
   return d;
 }

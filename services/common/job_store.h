@@ -167,6 +167,9 @@ FusionOptions JobFusionOptions(const PipelineOptions& options, const BoundingBox
 pb::JobManifest MakeManifest(const std::string& id, const pb::JobSpec& spec, const Dataset& dataset);
 // The DatasetOptions a JobSpec names; throws OptionError.
 DatasetOptions ToDatasetOptions(const pb::JobSpec& spec);
+// The spec's V (JobSpec.bbox), or nothing when it gives none; throws
+// OptionError unless it is 6 numbers with each max above its min.
+std::optional<BoundingBox> SpecVolume(const pb::JobSpec& spec);
 
 // A job as a worker or the aggregator sees it: the manifest decoded.
 struct JobGeometry {

@@ -531,14 +531,7 @@ int Serve(const IngestOptions& o) {
             !spec.colmap_dir().empty() || !spec.transforms_path().empty())
           throw OptionError("a stream names no paths: its client pushes the frames and cameras");
         const PipelineOptions po = JobPipelineOptions(spec.options());  // every option checked before the job exists
-        if (spec.bbox_size() != 0) {
-          if (spec.bbox_size() != 6) throw OptionError("bbox needs 6 numbers, got " + std::to_string(spec.bbox_size()));
-          BoundingBox b;
-          b.min = Eigen::Vector3d(spec.bbox(0), spec.bbox(1), spec.bbox(2));
-          b.max = Eigen::Vector3d(spec.bbox(3), spec.bbox(4), spec.bbox(5));
-          if (!b.IsValid()) throw OptionError("bbox: each max must be greater than its min");
-          JobFusionOptions(po, b);
-        }
+        if (const std::optional<BoundingBox> b = SpecVolume(spec)) JobFusionOptions(po, *b);
         if (open.has_intrinsics()) {
           pb::Camera c = open.intrinsics();
           c.clear_r(), c.clear_t();
