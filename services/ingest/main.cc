@@ -156,6 +156,37 @@ int UnfinishedJobs(const JobStore& store) {
   return n;
 }
 
+// Refuses a new job (Busy) while `busy` ingest threads (the ones `what` names)
+// reach --max-ingest-threads or the store's unfinished jobs reach --max-jobs;
+// `again` ends the message ("submit again later").
+void CheckAdmission(int busy, const std::string& what, const JobStore& store, const IngestOptions& o,
+                    const std::string& again) {
+  if (busy >= o.max_ingest_threads)
+    throw Busy(std::to_string(busy) + " jobs are being " + what + " (--max-ingest-threads " +
+               std::to_string(o.max_ingest_threads) + "); " + again);
+  const int unfinished = UnfinishedJobs(store);
+  if (unfinished >= o.max_jobs)
+    throw Busy(std::to_string(unfinished) + " jobs in the store have not ended (--max-jobs " +
+               std::to_string(o.max_jobs) + "); " + again);
+}
+
+// The error reply for what a request's handling threw: Busy, an input error
+// (`input_code`: a submit's files are ERROR_INPUT, a stream's fields
+// ERROR_BAD_REQUEST), a bad option, anything else.
+pb::Envelope RequestErrorReply(pb::ErrorCode input_code) {
+  try {
+    throw;
+  } catch (const Busy& e) {
+    return ErrorEnvelope(pb::ERROR_BUSY, e.what());
+  } catch (const InputError& e) {
+    return ErrorEnvelope(input_code, e.what());
+  } catch (const OptionError& e) {
+    return ErrorEnvelope(pb::ERROR_BAD_REQUEST, e.what());
+  } catch (const std::exception& e) {
+    return ErrorEnvelope(pb::ERROR_INTERNAL, e.what());
+  }
+}
+
 using Clock = std::chrono::steady_clock;
 
 // A stream's end recorded by ingest (the aggregator never loaded the job): status.pb, FAILED.
@@ -471,13 +502,7 @@ int Serve(const IngestOptions& o) {
     } else if (in->envelope.has_submit()) {
       const pb::JobSpec& spec = in->envelope.submit().spec();
       try {
-        if (static_cast<int>(spoolers.size()) >= o.max_ingest_threads)
-          throw Busy(std::to_string(spoolers.size()) + " jobs are being spooled (--max-ingest-threads " +
-                     std::to_string(o.max_ingest_threads) + "); submit again later");
-        const int unfinished = UnfinishedJobs(store);
-        if (unfinished >= o.max_jobs)
-          throw Busy(std::to_string(unfinished) + " jobs in the store have not ended (--max-jobs " +
-                     std::to_string(o.max_jobs) + "); submit again later");
+        CheckAdmission(static_cast<int>(spoolers.size()), "spooled", store, o, "submit again later");
         CheckUnderDataRoots(o.data_roots, "dataset_dir", spec.dataset_dir());
         CheckUnderDataRoots(o.data_roots, "images_dir", spec.images_dir());
         CheckUnderDataRoots(o.data_roots, "video_path", spec.video_path());
@@ -506,27 +531,15 @@ int Serve(const IngestOptions& o) {
         reply = NewEnvelope(id);
         reply.mutable_submit_reply()->set_job_id(id);
         reply.mutable_submit_reply()->set_num_views(ds->NumViews());
-      } catch (const Busy& e) {
-        reply = ErrorEnvelope(pb::ERROR_BUSY, e.what());
-      } catch (const InputError& e) {
-        reply = ErrorEnvelope(pb::ERROR_INPUT, e.what());
-      } catch (const OptionError& e) {
-        reply = ErrorEnvelope(pb::ERROR_BAD_REQUEST, e.what());
-      } catch (const std::exception& e) {
-        reply = ErrorEnvelope(pb::ERROR_INTERNAL, e.what());
+      } catch (const std::exception&) {
+        reply = RequestErrorReply(pb::ERROR_INPUT);
       }
     } else if (in->envelope.has_stream_open()) {
       const pb::StreamOpen& open = in->envelope.stream_open();
       const pb::JobSpec& spec = open.spec();
       try {
-        const int busy = static_cast<int>(spoolers.size() + streams.size());
-        if (busy >= o.max_ingest_threads)
-          throw Busy(std::to_string(busy) + " jobs are being spooled or streamed (--max-ingest-threads " +
-                     std::to_string(o.max_ingest_threads) + "); open the stream again later");
-        const int unfinished = UnfinishedJobs(store);
-        if (unfinished >= o.max_jobs)
-          throw Busy(std::to_string(unfinished) + " jobs in the store have not ended (--max-jobs " +
-                     std::to_string(o.max_jobs) + "); open the stream again later");
+        CheckAdmission(static_cast<int>(spoolers.size() + streams.size()), "spooled or streamed", store, o,
+                       "open the stream again later");
         if (!spec.dataset_dir().empty() || !spec.images_dir().empty() || !spec.video_path().empty() ||
             !spec.colmap_dir().empty() || !spec.transforms_path().empty())
           throw OptionError("a stream names no paths: its client pushes the frames and cameras");
@@ -554,14 +567,8 @@ int Serve(const IngestOptions& o) {
         r->set_credits(static_cast<std::uint32_t>(st->credits));
         r->set_max_frame_bytes(static_cast<std::uint64_t>(std::max<std::int64_t>(0, o.max_message_bytes - 65536)));
         r->set_max_frames(static_cast<std::uint32_t>(o.max_stream_frames));
-      } catch (const Busy& e) {
-        reply = ErrorEnvelope(pb::ERROR_BUSY, e.what());
-      } catch (const InputError& e) {
-        reply = ErrorEnvelope(pb::ERROR_BAD_REQUEST, e.what());
-      } catch (const OptionError& e) {
-        reply = ErrorEnvelope(pb::ERROR_BAD_REQUEST, e.what());
-      } catch (const std::exception& e) {
-        reply = ErrorEnvelope(pb::ERROR_INTERNAL, e.what());
+      } catch (const std::exception&) {
+        reply = RequestErrorReply(pb::ERROR_BAD_REQUEST);
       }
     } else if (in->envelope.has_stream_frame() || in->envelope.has_stream_end()) {
       const std::string& id = in->envelope.job_id();
