@@ -66,4 +66,12 @@ ReconstructionPlan ReconstructionPlan::Compute(const std::vector<PinholeView>& c
   return plan;
 }
 
+int ReconstructionPlan::SettledFrames(int received, bool ended, const PipelineOptions& options) {
+  if (received <= 0) return 0;
+  if (ended) return received;
+  const long long gap = options.depth.max_frame_gap;
+  if (gap <= 0 || !options.views.empty()) return 0;
+  return static_cast<int>(std::max<long long>(0, received - 2 * gap));
+}
+
 }  // namespace lfrecon

@@ -31,6 +31,18 @@ struct ReconstructionPlan {
   static ReconstructionPlan Compute(const std::vector<PinholeView>& views, const BoundingBox& volume,
                                     const PipelineOptions& options);
 
+  // Growing with the stream: of a sequence of which the first `received`
+  // frames are known (the whole sequence when `ended`), the number of leading
+  // frames whose entries (selected, on_grid, need_sparse, depth neighbours,
+  // voters, read_before_emit, photoconsistency neighbours) are final: Compute
+  // on the first `received` cameras gives them exactly as Compute on the whole
+  // sequence. Frame i's entries need the cameras up to i + max_frame_gap (its
+  // own neighbours, voters and photo neighbours), and a voter's sparse-map
+  // neighbours up to i + 2 max_frame_gap; with max_frame_gap 0 (unbounded)
+  // nothing is final before the end. Colour and carving frames are final only
+  // at the end. Only for options.views empty (an explicit list is not grown).
+  static int SettledFrames(int received, bool ended, const PipelineOptions& options);
+
   int num_views() const { return static_cast<int>(selected.size()); }
   bool Selected(int i) const { return selected.at(static_cast<std::size_t>(i)) != 0; }
   bool OnGrid(int i) const { return depth.on_grid.at(static_cast<std::size_t>(i)) != 0; }

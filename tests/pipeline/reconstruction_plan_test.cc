@@ -136,5 +136,51 @@ TEST(ReconstructionPlan, SparseSequenceUsesEveryViewWithin5Degrees) {
   EXPECT_EQ(plan.PhotoNeighbours(50).size(), 12u);
 }
 
+// Growing with the stream: on a closed dense loop (0.35° apart, 1029 frames, so
+// the last views come back within every stage's angle of the first), Compute on
+// every prefix agrees with Compute on the whole loop on each frame SettledFrames
+// calls final; some frame of a prefix that it does not call final disagrees,
+// so the comparison sees a truncated neighbourhood.
+TEST(ReconstructionPlan, PrefixPlanAgreesWithFullPlanOnSettledFrames) {
+  const int n = 1029;  // 360 / 0.35
+  const std::vector<PinholeView> cams = Arc(n, 0.35);
+  PipelineOptions o;
+  o.depth.max_frame_gap = 30;
+  const ReconstructionPlan full = ReconstructionPlan::Compute(cams, Box(), o);
+  const auto same = [&](const ReconstructionPlan& a, int i) {
+    const auto at = [i](const auto& v) { return v.at(static_cast<std::size_t>(i)); };
+    return at(a.selected) == at(full.selected) && at(a.depth.on_grid) == at(full.depth.on_grid) &&
+           at(a.depth.need_sparse) == at(full.depth.need_sparse) && at(a.depth.uses) == at(full.depth.uses) &&
+           at(a.depth.voters) == at(full.depth.voters) && at(a.photo) == at(full.photo) &&
+           at(a.depth.read_before_emit) == at(full.depth.read_before_emit);
+  };
+  int checked = 0;
+  for (int p : {1, 30, 60, 61, 100, 200, 400, 700, 999, 1028}) {
+    const std::vector<PinholeView> prefix(cams.begin(), cams.begin() + p);
+    const ReconstructionPlan part = ReconstructionPlan::Compute(prefix, Box(), o);
+    const int settled = ReconstructionPlan::SettledFrames(p, false, o);
+    EXPECT_EQ(settled, std::max(0, p - 60)) << p;
+    for (int i = 0; i < settled; ++i) {
+      EXPECT_TRUE(same(part, i)) << "prefix " << p << " frame " << i;
+      ++checked;
+    }
+    if (p >= 30) {
+      bool all_same = true;
+      for (int i = settled; i < p; ++i) all_same = all_same && same(part, i);
+      EXPECT_FALSE(all_same) << "prefix " << p;
+    }
+  }
+  EXPECT_GT(checked, 3000);
+  // Ended: every frame; unbounded gap or given views: none before the end.
+  EXPECT_EQ(ReconstructionPlan::SettledFrames(n, true, o), n);
+  PipelineOptions unbounded = o;
+  unbounded.depth.max_frame_gap = 0;
+  EXPECT_EQ(ReconstructionPlan::SettledFrames(500, false, unbounded), 0);
+  EXPECT_EQ(ReconstructionPlan::SettledFrames(500, true, unbounded), 500);
+  PipelineOptions given = o;
+  given.views = {3};
+  EXPECT_EQ(ReconstructionPlan::SettledFrames(500, false, given), 0);
+}
+
 }  // namespace
 }  // namespace lfrecon
