@@ -20,7 +20,6 @@
 #include <utility>
 #include <vector>
 
-#include <opencv2/imgproc.hpp>
 
 #include "fusion/marching_cubes_table.h"
 #include "fusion/surface_evidence.h"
@@ -232,49 +231,6 @@ const FusionOptions& ProbabilisticFusion::options() const { return impl_->option
 int ProbabilisticFusion::NumViews() const { return static_cast<int>(impl_->views.size()); }
 
 bool ProbabilisticFusion::HasView(int view_id) const { return impl_->view_ids.count(view_id) > 0; }
-
-DepthMap WithGatedBackgroundFloor(const DepthMap& map, const PinholeView& view, const BoundingBox& volume,
-                                  double floor, double gate_px, const cv::Mat& protect) {
-  if (!(floor > 0) || map.depth.empty()) return map;
-  DepthMap out;
-  out.depth = map.depth;
-  out.label = map.label;
-  out.confidence = map.confidence.empty() ? cv::Mat(map.depth.size(), CV_32F, cv::Scalar(1.0f)) : map.confidence.clone();
-  const bool labels = map.label.size() == map.depth.size();
-  constexpr auto kFg = static_cast<std::uint8_t>(DepthLabel::kForeground);
-  constexpr auto kBg = static_cast<std::uint8_t>(DepthLabel::kBackground);
-  // 0 = foreground depth, 1 = background depth, 2 = nothing.
-  cv::Mat kind(map.depth.size(), CV_8U, cv::Scalar(2));
-  for (int r = 0; r < map.depth.rows; ++r) {
-    const float* d = map.depth.ptr<float>(r);
-    const std::uint8_t* l = labels ? map.label.ptr<std::uint8_t>(r) : nullptr;
-    std::uint8_t* k = kind.ptr<std::uint8_t>(r);
-    for (int c = 0; c < map.depth.cols; ++c) {
-      if (!(d[c] > 0)) continue;
-      // Only a ray that passes V to a background beyond it is raised: a
-      // background-labelled depth inside V (a thin part the propagation
-      // labelled background) counts as foreground here, as it does without labels.
-      const bool inside = volume.Contains(view.Unproject(Eigen::Vector2d(c + 0.5, r + 0.5), d[c]));
-      if ((l && l[c] == kFg) || inside) k[c] = 0;
-      else if (!l || l[c] == kBg) k[c] = 1;
-    }
-  }
-  cv::Mat dist;  // pixels to the nearest foreground depth
-  if (gate_px > 0) {
-    cv::Mat not_fg = kind != 0;  // 255 where not foreground
-    if (protect.size() == kind.size()) not_fg.setTo(0, protect);
-    cv::distanceTransform(not_fg, dist, cv::DIST_L2, cv::DIST_MASK_PRECISE);
-  }
-  const float f = static_cast<float>(floor), g = static_cast<float>(gate_px);
-  for (int r = 0; r < map.depth.rows; ++r) {
-    const std::uint8_t* k = kind.ptr<std::uint8_t>(r);
-    float* cf = out.confidence.ptr<float>(r);
-    const float* dd = dist.empty() ? nullptr : dist.ptr<float>(r);
-    for (int c = 0; c < map.depth.cols; ++c)
-      if (k[c] == 1 && cf[c] < f && (!dd || dd[c] >= g)) cf[c] = f;
-  }
-  return out;
-}
 
 bool ProbabilisticFusion::Integrate(const PinholeView& view, const DepthMap& input, int view_id) {
   if (view_id >= 0 && HasView(view_id)) {

@@ -66,15 +66,6 @@ struct FusionStats {
   std::size_t pruned_voxels = 0;  // dropped by pruning, summed over prunes (re-activated ones count again)
 };
 
-// Background free space (ours; PipelineOptions::background_floor says why and
-// what it measured): depths whose point lies outside V and that are not
-// labelled foreground (the ray passes through V to the background), at least
-// `gate_px` pixels (Euclidean) from every foreground depth (labelled
-// foreground, or a point inside V) and from every nonzero pixel of `protect`
-// (CV_8U of the map's size; empty: none), get confidence >= `floor`.
-DepthMap WithGatedBackgroundFloor(const DepthMap& map, const PinholeView& view, const BoundingBox& volume,
-                                  double floor, double gate_px, const cv::Mat& protect = cv::Mat());
-
 class ProbabilisticFusion {
  public:
   explicit ProbabilisticFusion(const FusionOptions& options);  // throws OptionError

@@ -12,6 +12,7 @@
 #include <map>
 #include <set>
 
+#include "fusion/free_space.h"
 #include "fusion/mesh_render.h"
 #include "pipeline/finish_surface.h"
 #include "pipeline/reconstruction_plan.h"
@@ -237,10 +238,22 @@ PipelineResult EmbeddedPipeline::Run(FrameSource& frames) {
         }
         st.fused_pixels += fused_map.CountValid();
         Timer t;
-        if (NeedsBackgroundFloor(options_))
-          fusion.Integrate(views_[i], WithBackgroundFloor(fused_map, sparse, views_[i], volume_, options_), i);
-        else
+        const PipelineOptions::MaskFreeSpace& mf = options_.mask_free_space;
+        const cv::Mat mask = mask_of_view_ && mf.confidence > 0 ? mask_of_view_(i) : cv::Mat();
+        if (NeedsBackgroundFloor(options_) || !mask.empty()) {
+          DepthMap input = WithBackgroundFloor(fused_map, sparse, views_[i], volume_, options_);
+          if (!mask.empty()) {
+            if (mask.size() != fused_map.depth.size())
+              throw InputError("mask of view " + std::to_string(i), std::to_string(mask.cols) + "x" +
+                               std::to_string(mask.rows) + ", its frame " + std::to_string(fused_map.depth.cols) +
+                               "x" + std::to_string(fused_map.depth.rows));
+            input = WithMaskFreeSpace(input, mask, mf.confidence, mf.margin_px);
+            ++st.masked_views;
+          }
+          fusion.Integrate(views_[i], input, i);
+        } else {
           fusion.Integrate(views_[i], fused_map, i);
+        }
         st.seconds_fusion += t.Seconds();
         st.cpu_fusion += t.CpuSeconds();
         if (write && options_.write_depth) {
@@ -365,6 +378,7 @@ PipelineResult EmbeddedPipeline::Run(FrameSource& frames) {
         {"max_frames_held_pipeline", st.max_frames_held_pipeline},
         {"max_frames_pending_depth", st.max_frames_pending_depth},
         {"color_frames", st.color_frames},
+        {"masked_views", st.masked_views},
         {"sparse_pixels", st.sparse_pixels},
         {"filtered_pixels", st.filtered_pixels},
         {"fused_pixels", st.fused_pixels},
@@ -391,6 +405,9 @@ PipelineResult EmbeddedPipeline::Run(FrameSource& frames) {
          {{"floor", options_.densify ? options_.background_floor.floor : 0.0},
           {"gate_px", options_.background_floor.gate_px},
           {"gate_on_sparse", options_.background_floor.gate_on_sparse}}},
+        {"mask_free_space",
+         {{"confidence", mask_of_view_ ? options_.mask_free_space.confidence : 0.0},
+          {"margin_px", options_.mask_free_space.margin_px}}},
         {"activation_min_confidence", fo.activation_min_confidence},
         {"probability_clamp", fo.probability_clamp},
         {"band", fo.band},

@@ -36,6 +36,7 @@ struct PipelineStats {
   int max_frames_held_pipeline = 0;  // in the pipeline's densification window
   int max_frames_pending_depth = 0;  // frames of views read but not yet emitted by StreamingDepth
   int color_frames = 0;
+  int masked_views = 0;  // views fused with their mask's free space (PipelineOptions::mask_free_space)
   long long sparse_pixels = 0, filtered_pixels = 0, fused_pixels = 0;  // pixels with depth, summed over views
   double voxel_size = 0;
   std::size_t active_voxels = 0;
@@ -74,6 +75,10 @@ class EmbeddedPipeline {
 
   // Called after each view is fused (view index, views done, views total); for progress or tests.
   void SetViewCallback(std::function<void(int, int, int)> cb) { view_callback_ = std::move(cb); }
+  // Object masks (CV_8U of the view's size, nonzero = the object; an empty Mat:
+  // none for that view), read when view i is fused, for
+  // PipelineOptions::mask_free_space. Not set: no masks.
+  void SetMasks(std::function<cv::Mat(int)> mask_of_view) { mask_of_view_ = std::move(mask_of_view); }
 
  private:
   std::vector<PinholeView> views_;
@@ -81,6 +86,7 @@ class EmbeddedPipeline {
   PipelineOptions options_;
   std::vector<std::string> names_;
   std::function<void(int, int, int)> view_callback_;
+  std::function<cv::Mat(int)> mask_of_view_;
 };
 
 

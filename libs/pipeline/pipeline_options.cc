@@ -27,6 +27,10 @@ void PipelineOptions::Check() const {
     throw OptionError("background_floor.floor must be in [0, 1]");
   if (!(std::isfinite(background_floor.gate_px) && background_floor.gate_px >= 0))
     throw OptionError("background_floor.gate_px must be finite and >= 0");
+  if (!(mask_free_space.confidence >= 0 && mask_free_space.confidence <= 1))
+    throw OptionError("mask_free_space.confidence must be in [0, 1]");
+  if (!(std::isfinite(mask_free_space.margin_px) && mask_free_space.margin_px >= 0))
+    throw OptionError("mask_free_space.margin_px must be finite and >= 0");
 }
 
 double PipelineVoxelSize(const BoundingBox& volume, const PipelineOptions& options) {

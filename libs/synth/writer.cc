@@ -7,6 +7,7 @@
 #include <cstdio>
 #include <fstream>
 #include <nlohmann/json.hpp>
+#include <opencv2/imgcodecs.hpp>
 #include <system_error>
 
 #include "io/colmap_model.h"
@@ -14,6 +15,7 @@
 #include "io/frame_source.h"
 #include "io/ply.h"
 #include "io/transforms_json.h"
+#include "synth/renderer.h"
 #include "util/error.h"
 #include "util/progress.h"
 
@@ -93,6 +95,7 @@ SynthWriteSummary WriteSynthDataset(const SynthSequence& seq, const SynthWriteOp
   MakeDir(out / "images");
   MakeDir(out / "sparse");
   if (options.depth_every > 0) MakeDir(out / "depth");
+  if (options.write_masks) MakeDir(out / "masks");
   {
     std::error_code ec;
     if (!fs::is_empty(out / "images", ec))
@@ -142,6 +145,11 @@ SynthWriteSummary WriteSynthDataset(const SynthSequence& seq, const SynthWriteOp
                       options.jpeg_quality);
       if (options.depth_every > 0 && i % options.depth_every == 0)
         WriteExr(SynthDepthPath(out, i), DepthToFloat(r.depth));
+      if (options.write_masks) {
+        const fs::path path = out / "masks" / (fs::path(SynthSequence::ImageName(i, options.format)).stem().string() + ".png");
+        if (!cv::imwrite(path.string(), ForegroundMask(seq.scene(), r.labels)))
+          throw InputError(path.string(), "cannot write");
+      }
       progress.Advance();
     }
   });

@@ -3,7 +3,8 @@
 //   images/NNNNN.png|jpg, sparse/{cameras,images,points3D}.txt (COLMAP text,
 //   world-to-camera, OpenCV axes), transforms.json (NeRF, camera-to-world,
 //   OpenGL axes), depth/depth_NNNN.exr (planar depth, metres, float32, every
-//   k-th frame, NNNN = sequence index), gt_mesh.ply, gt_thin.ply, scene.json.
+//   k-th frame, NNNN = sequence index), gt_mesh.ply, gt_thin.ply, scene.json,
+//   and optionally masks/NNNNN.png.
 #include <filesystem>
 #include <string>
 
@@ -17,6 +18,9 @@ struct SynthWriteOptions {
   int jpeg_quality = 95;
   int depth_every = 8;  // write depth for frames 0, k, 2k, ...; 0: none
   bool write_meshes = true;
+  // masks/NNNNN.png: 255 where a pixel's centre sees a foreground primitive
+  // (ForegroundMask), 0 elsewhere, as an object mask from a segmenter would be.
+  bool write_masks = false;
 
   void Check() const;  // throws OptionError
 };

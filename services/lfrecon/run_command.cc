@@ -37,6 +37,7 @@ struct RunArgs {
   int color_views = 8;
   double sigma_s = 0;
   bool no_refine_poses = false;
+  bool no_mask_free_space = false;
   RunOutputFlags outputs;  // mesh formats, point cloud, COLMAP workspace, report.html
   bool all_views = false;
 };
@@ -110,7 +111,12 @@ int RunPipeline(const RunArgs& args) {
                    {"converged", ps.converged}};
     if (!args.out.empty()) WriteRefinedModel(ds, views, args.out / "sparse_refined");
   }
+  if (args.no_mask_free_space) options.mask_free_space.confidence = 0;
   EmbeddedPipeline pipeline(views, ds.bbox(), options, names);
+  if (ds.HasMasks() && options.mask_free_space.confidence > 0) {
+    spdlog::info("run: masks from {}: free space outside them in fusion", ds.mask_source());
+    pipeline.SetMasks([&ds](int i) { return ds.ReadMask(i); });
+  }
   auto frames = ds.OpenFrames();
   const PipelineResult r = pipeline.Run(*frames);
   if (!args.out.empty()) {
@@ -157,6 +163,9 @@ void AddRunCommand(CLI::App& root, int* exit_code) {
                 "Use the given poses as they are. By default they are first refined against the frames (corner "
                 "tracks + bundle adjustment with a prior around each given pose; OUT/sparse_refined/): poses with "
                 "the error of a good SfM solution otherwise halve the mesh's quality (docs/benchmarks.md)");
+  cmd->add_flag("--no-mask-free-space", args->no_mask_free_space,
+                "With masks (masks/, an alpha channel, mask_path): use them for V only. By default the fusion "
+                "also takes every pixel more than 2 px outside its mask as empty space through V");
   cmd->add_option("--color-views", args->color_views, "Frames kept to colour the mesh (0: none)")->capture_default_str();
   cmd->callback([args, exit_code] { *exit_code = RunPipeline(*args); });
 }

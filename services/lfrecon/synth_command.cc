@@ -22,6 +22,7 @@ struct SynthFlags {
   int jpeg_quality = 95;
   int depth_every = 8;
   bool no_meshes = false;
+  bool masks = false;
   bool full_aa = false;
 };
 
@@ -47,6 +48,7 @@ int RunSynth(SynthFlags flags) {
   write.jpeg_quality = flags.jpeg_quality;
   write.depth_every = flags.depth_every;
   write.write_meshes = !flags.no_meshes;
+  write.write_masks = flags.masks;
   write.Check();
 
   const synth::SynthSequence seq = synth::SynthSequence::Create(flags.options);
@@ -101,6 +103,8 @@ void AddSynthCommand(CLI::App& root, int* exit_code) {
   cmd->add_option("--format", flags->format, "Image format: png or jpg")->capture_default_str();
   cmd->add_option("--noise", o.render.noise_sigma, "Gaussian noise sigma per channel, colours in [0, 1]")
       ->capture_default_str();
+  cmd->add_flag("--masks", flags->masks,
+                "Also write masks/NNNNN.png: 255 where a pixel's centre sees the objects (not the table or walls)");
   cmd->add_option("--jpeg-quality", flags->jpeg_quality, "JPEG quality of --format jpg (1-100)")
       ->capture_default_str();
   cmd->add_option("--exposure-drift", o.degradation.exposure_drift,

@@ -25,6 +25,7 @@
 #include <vector>
 
 #include "eval/mesh_metrics.h"
+#include "fusion/free_space.h"
 #include "fusion/probabilistic_fusion.h"
 #include "fusion/surface_evidence.h"
 #include "io/dataset.h"
