@@ -238,22 +238,19 @@ PipelineResult EmbeddedPipeline::Run(FrameSource& frames) {
         }
         st.fused_pixels += fused_map.CountValid();
         Timer t;
+        // Free space added before fusion; each step returns the map as it is when it is off.
+        DepthMap input = WithBackgroundFloor(fused_map, sparse, views_[i], volume_, options_);
         const PipelineOptions::MaskFreeSpace& mf = options_.mask_free_space;
         const cv::Mat mask = mask_of_view_ && mf.confidence > 0 ? mask_of_view_(i) : cv::Mat();
-        if (NeedsBackgroundFloor(options_) || !mask.empty()) {
-          DepthMap input = WithBackgroundFloor(fused_map, sparse, views_[i], volume_, options_);
-          if (!mask.empty()) {
-            if (mask.size() != fused_map.depth.size())
-              throw InputError("mask of view " + std::to_string(i), std::to_string(mask.cols) + "x" +
-                               std::to_string(mask.rows) + ", its frame " + std::to_string(fused_map.depth.cols) +
-                               "x" + std::to_string(fused_map.depth.rows));
-            input = WithMaskFreeSpace(input, mask, mf.confidence, mf.margin_px);
-            ++st.masked_views;
-          }
-          fusion.Integrate(views_[i], input, i);
-        } else {
-          fusion.Integrate(views_[i], fused_map, i);
+        if (!mask.empty()) {
+          if (mask.size() != fused_map.depth.size())
+            throw InputError("mask of view " + std::to_string(i), std::to_string(mask.cols) + "x" +
+                             std::to_string(mask.rows) + ", its frame " + std::to_string(fused_map.depth.cols) + "x" +
+                             std::to_string(fused_map.depth.rows));
+          input = WithMaskFreeSpace(input, mask, mf.confidence, mf.margin_px);
+          ++st.masked_views;
         }
+        fusion.Integrate(views_[i], input, i);
         st.seconds_fusion += t.Seconds();
         st.cpu_fusion += t.CpuSeconds();
         if (write && options_.write_depth) {

@@ -146,7 +146,7 @@ SynthWriteSummary WriteSynthDataset(const SynthSequence& seq, const SynthWriteOp
       if (options.depth_every > 0 && i % options.depth_every == 0)
         WriteExr(SynthDepthPath(out, i), DepthToFloat(r.depth));
       if (options.write_masks) {
-        const fs::path path = out / "masks" / (fs::path(SynthSequence::ImageName(i, options.format)).stem().string() + ".png");
+        const fs::path path = out / "masks" / SynthSequence::ImageName(i, "png");  // NNNNN.png whatever the frames' format
         if (!cv::imwrite(path.string(), ForegroundMask(seq.scene(), r.labels)))
           throw InputError(path.string(), "cannot write");
       }
