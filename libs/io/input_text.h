@@ -15,4 +15,12 @@ constexpr std::size_t kMaxInputTokenChars = 32;
 // not quoted at all, only its length is given ("a text of N bytes").
 std::string InputToken(const std::string& text);
 
+// Text a peer chose that is worth showing in logs and messages (a worker's
+// name, a worker's error, an aggregator's error reply, an exception's text
+// that holds a client's path): printable ASCII only (every other byte becomes
+// '?', so no newline or escape sequence can forge a log line or a terminal's
+// state), at most `max_chars` of it, a longer text cut and its length given
+// ("abc... (10240 bytes)"). Not quoted.
+std::string PeerText(const std::string& text, std::size_t max_chars = 256);
+
 }  // namespace lfrecon
