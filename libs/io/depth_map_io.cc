@@ -14,6 +14,7 @@
 #include <opencv2/imgproc.hpp>
 #include <string>
 
+#include "io/input_text.h"
 #include "util/error.h"
 
 namespace lfrecon {
@@ -90,13 +91,12 @@ cv::Mat ReadPfm(const fs::path& path) {
   else if (magic == "PF")
     channels = 3;
   else
-    throw InputError(file, "magic",
-                     "not a PFM file (expected 'Pf' or 'PF', got '" + magic.substr(0, 8) + "')");
+    throw InputError(file, "magic", "not a PFM file (expected 'Pf' or 'PF', got " + InputToken(magic) + ")");
   auto integer = [&](const char* what) {
     const std::string t = token(what);
     char* end = nullptr;
     const long v = std::strtol(t.c_str(), &end, 10);
-    if (*end != '\0' || v <= 0 || v > (1 << 20)) throw InputError(file, what, "invalid value '" + t + "'");
+    if (*end != '\0' || v <= 0 || v > (1 << 20)) throw InputError(file, what, "invalid value " + InputToken(t));
     return static_cast<int>(v);
   };
   const int width = integer("width");
@@ -105,7 +105,7 @@ cv::Mat ReadPfm(const fs::path& path) {
   char* end = nullptr;
   const double scale = std::strtod(scale_text.c_str(), &end);
   if (*end != '\0' || scale == 0 || !std::isfinite(scale))
-    throw InputError(file, "scale", "invalid value '" + scale_text + "'");
+    throw InputError(file, "scale", "invalid value " + InputToken(scale_text));
   ++pos;  // the single whitespace byte that ends the header
   const bool little_endian = scale < 0;
   const std::uint64_t row_bytes = sizeof(float) * static_cast<std::uint64_t>(width) * channels;
@@ -192,29 +192,33 @@ ExrHeader ReadExrHeader(const fs::path& path) {
   while (true) {
     const std::string name = cstring("attribute name", max_name);
     if (name.empty()) break;  // end of the header
-    const std::string type = cstring(name.c_str(), max_name);
-    const std::uint32_t size = u32(name.c_str());
-    if (size > data.size() - pos) throw InputError(file, name, "EXR attribute of " + std::to_string(size) + " bytes is truncated");
+    const std::string field = InputToken(name);  // the file's bytes, up to 255 of them
+    const std::string type = cstring(field.c_str(), max_name);
+    const std::uint32_t size = u32(field.c_str());
+    if (size > data.size() - pos)
+      throw InputError(file, field, "EXR attribute of " + std::to_string(size) + " bytes is truncated");
     const std::size_t value_end = pos + size;
     if (name == "dataWindow") {
-      if (type != "box2i" || size != 16) throw InputError(file, name, "expected a box2i of 16 bytes");
+      if (type != "box2i" || size != 16) throw InputError(file, field, "expected a box2i of 16 bytes");
       const long long x0 = i32("dataWindow"), y0 = i32("dataWindow"), x1 = i32("dataWindow"), y1 = i32("dataWindow");
       width = x1 - x0 + 1;
       height = y1 - y0 + 1;
       have_window = true;
     } else if (name == "channels") {
-      if (type != "chlist") throw InputError(file, name, "expected a chlist");
+      if (type != "chlist") throw InputError(file, field, "expected a chlist");
       int n = 0;
       while (pos < value_end && data[pos] != '\0') {
         cstring("channels", max_name);
-        if (value_end < pos || value_end - pos < 16) throw InputError(file, name, "channel list is truncated");
+        if (value_end < pos || value_end - pos < 16) throw InputError(file, field, "channel list is truncated");
         const std::int32_t pixel_type = i32("channels");
         pos += 8;  // pLinear, reserved, xSampling
         pos += 4;  // ySampling
-        if (pixel_type < 0 || pixel_type > 2) throw InputError(file, name, "unknown pixel type " + std::to_string(pixel_type));
-        if (++n > kMaxExrChannels) throw InputError(file, name, "more than " + std::to_string(kMaxExrChannels) + " channels");
+        if (pixel_type < 0 || pixel_type > 2)
+          throw InputError(file, field, "unknown pixel type " + std::to_string(pixel_type));
+        if (++n > kMaxExrChannels)
+          throw InputError(file, field, "more than " + std::to_string(kMaxExrChannels) + " channels");
       }
-      if (pos >= value_end) throw InputError(file, name, "channel list is not terminated");
+      if (pos >= value_end) throw InputError(file, field, "channel list is not terminated");
       h.channels = n;
       have_channels = true;
     }
@@ -256,7 +260,7 @@ cv::Mat ReadDepthMap(const fs::path& path) {
   const std::string ext = Lower(path.extension().string());
   if (ext == ".pfm") return ReadPfm(path);
   if (ext == ".exr") return ReadExr(path);
-  throw InputError(path.string(), "unsupported depth map format '" + ext + "' (expected .pfm or .exr)");
+  throw InputError(path.string(), "unsupported depth map format " + InputToken(ext) + " (expected .pfm or .exr)");
 }
 
 // ---------------------------------------------------------------------------

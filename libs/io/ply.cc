@@ -3,6 +3,7 @@
 #include <spdlog/spdlog.h>
 
 #include <algorithm>
+#include <cctype>
 #include <cerrno>
 #include <cmath>
 #include <cstdlib>
@@ -14,12 +15,25 @@
 #include <string>
 #include <vector>
 
+#include "io/input_text.h"
 #include "util/error.h"
 
 namespace lfrecon {
 namespace fs = std::filesystem;
 
 namespace {
+
+// A name from the file's header (an element's) for an error's field: as
+// written when it is a short plain word ("vertex", "face"), else quoted by
+// InputToken, so a header line cannot put control bytes or a long text into
+// an error message.
+std::string HeaderName(const std::string& name) {
+  const bool plain = !name.empty() && name.size() <= kMaxInputTokenChars &&
+                     std::all_of(name.begin(), name.end(), [](char c) {
+                       return std::isalnum(static_cast<unsigned char>(c)) || c == '_' || c == '-';
+                     });
+  return plain ? name : InputToken(name);
+}
 
 enum class PlyType { kInt8, kUint8, kInt16, kUint16, kInt32, kUint32, kFloat32, kFloat64 };
 
@@ -107,7 +121,7 @@ class PlyBody {
     pos_ = end;
     if (stop != data_.c_str() + end || (IsIntegral(type) && v != std::floor(v)))
       throw InputError(file_, field,
-                       "'" + data_.substr(start, std::min<size_t>(end - start, 40)) + "' is not a" +
+                       InputToken(data_.substr(start, end - start)) + " is not a" +
                            (IsIntegral(type) ? "n integer" : " number"));
     return v;
   }
@@ -207,7 +221,7 @@ TriangleMesh ReadPly(const fs::path& path) {
       else if (name == "binary_big_endian")
         format = PlyFormat::kBinaryBigEndian;
       else
-        throw InputError(file, field, "unknown format '" + name + "'");
+        throw InputError(file, field, "unknown format " + InputToken(name));
       have_format = true;
     } else if (keyword == "element") {
       PlyElement e;
@@ -217,7 +231,8 @@ TriangleMesh ReadPly(const fs::path& path) {
       errno = 0;
       e.count = std::strtoull(count.c_str(), &end, 10);
       if (e.name.empty() || count.empty() || count[0] == '-' || *end != '\0' || errno == ERANGE)
-        throw InputError(file, field, "malformed element line '" + line + "'");
+        throw InputError(file, field,
+                         "malformed element line (name " + InputToken(e.name) + ", count " + InputToken(count) + ")");
       elements.push_back(e);
     } else if (keyword == "property") {
       if (elements.empty()) throw InputError(file, field, "property before any element");
@@ -230,16 +245,18 @@ TriangleMesh ReadPly(const fs::path& path) {
         p.is_list = true;
         if (!ParsePlyType(count_type, &p.count_type) || !ParsePlyType(item_type, &p.type) ||
             !IsIntegral(p.count_type))
-          throw InputError(file, field, "malformed list property '" + line + "'");
+          throw InputError(file, field,
+                           "malformed list property (count type " + InputToken(count_type) + ", item type " +
+                               InputToken(item_type) + ")");
       } else {
         in >> p.name;
         if (!ParsePlyType(type, &p.type))
-          throw InputError(file, field, "unknown property type '" + type + "'");
+          throw InputError(file, field, "unknown property type " + InputToken(type));
       }
       if (p.name.empty()) throw InputError(file, field, "property without a name");
       elements.back().properties.push_back(p);
     } else {
-      throw InputError(file, field, "unexpected header keyword '" + keyword + "'");
+      throw InputError(file, field, "unexpected header keyword " + InputToken(keyword));
     }
   }
   if (!have_format) throw InputError(file, "header", "no format line");
@@ -253,11 +270,11 @@ TriangleMesh ReadPly(const fs::path& path) {
     // Counts must be coverable by the bytes left, so a corrupt header cannot make us allocate.
     // An entry without properties takes no bytes, so no file size bounds its count: refused.
     if (e.properties.empty() && e.count > 0)
-      throw InputError(file, "element " + e.name,
+      throw InputError(file, "element " + HeaderName(e.name),
                        "has no properties but a count of " + std::to_string(e.count));
     const std::uint64_t min_bytes = e.MinBytes(binary);
     if (min_bytes > 0 && e.count > body.Remaining() / min_bytes)
-      throw InputError(file, "element " + e.name,
+      throw InputError(file, "element " + HeaderName(e.name),
                        "count " + std::to_string(e.count) + " does not fit in the " +
                            std::to_string(body.Remaining()) + " bytes left (truncated or corrupt file)");
     if (e.name == "vertex") {
@@ -345,8 +362,9 @@ TriangleMesh ReadPly(const fs::path& path) {
       if (skipped > 0) spdlog::warn("{}: skipped {} faces with fewer than 3 vertices", file, skipped);
     } else {
       // Unknown element (edges, materials...): read past it.
+      const std::string name = HeaderName(e.name);
       for (std::uint64_t i = 0; i < e.count; ++i) {
-        const std::string field = e.name + " " + std::to_string(i);
+        const std::string field = name + " " + std::to_string(i);
         for (const PlyProperty& p : e.properties) {
           if (!p.is_list) {
             body.Read(p.type, field);

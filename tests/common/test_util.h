@@ -4,6 +4,7 @@
 #include <gtest/gtest.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <filesystem>
 #include <functional>
 #include <string>
@@ -42,6 +43,27 @@ inline void ExpectInputError(const std::function<void()>& f, const std::vector<s
   } catch (const InputError& e) {
     for (const std::string& n : needles)
       EXPECT_NE(std::string(e.what()).find(n), std::string::npos) << "'" << n << "' not in: " << e.what();
+  } catch (const std::exception& e) {
+    ADD_FAILURE() << "expected InputError, got: " << e.what();
+  }
+}
+
+// As ExpectInputError, and the message does not echo the file: printable
+// ASCII only, at most `max_chars` long, none of the `absent` strings in it.
+inline void ExpectInputErrorWithoutEcho(const std::function<void()>& f, const std::vector<std::string>& needles,
+                                        const std::vector<std::string>& absent, std::size_t max_chars = 400) {
+  try {
+    f();
+    ADD_FAILURE() << "no InputError thrown";
+  } catch (const InputError& e) {
+    const std::string what = e.what();
+    for (const std::string& n : needles)
+      EXPECT_NE(what.find(n), std::string::npos) << "'" << n << "' not in: " << what;
+    for (const std::string& a : absent) EXPECT_EQ(what.find(a), std::string::npos) << "echoed: " << what;
+    EXPECT_LE(what.size(), max_chars) << what.substr(0, max_chars) << "...";
+    const auto bad = std::find_if(what.begin(), what.end(), [](char c) { return c < 0x20 || c >= 0x7f; });
+    EXPECT_TRUE(bad == what.end()) << "byte " << static_cast<int>(static_cast<unsigned char>(*bad)) << " at "
+                                   << bad - what.begin() << " of: " << what.substr(0, max_chars);
   } catch (const std::exception& e) {
     ADD_FAILURE() << "expected InputError, got: " << e.what();
   }

@@ -184,6 +184,33 @@ TEST(DepthMapIoBadInput, NamesTheFile) {
   ExpectInputError([&] { ReadDepthMap(tmp.path() / "d.tiff"); }, {"d.tiff", "unsupported"});
 }
 
+// The PFM header's tokens (magic, width, height, scale) and an EXR
+// attribute's name were quoted raw in errors: binary bytes and any length.
+// Now the error names the file and the field and quotes at most a short
+// printable token.
+TEST(DepthMapIoBadInput, ErrorsDoNotEchoBinaryOrHugeTokens) {
+  TempDir tmp;
+  const fs::path pfm = tmp.path() / "t.pfm";
+  const std::string huge = "SECRET" + std::string(10000, 'x');
+  using testing::ExpectInputErrorWithoutEcho;
+  auto expect = [&](const std::string& bytes, const std::vector<std::string>& needles) {
+    std::ofstream(pfm, std::ios::binary) << bytes;
+    ExpectInputErrorWithoutEcho([&] { ReadPfm(pfm); }, needles, {"SECRET", "xxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxx"});
+  };
+  expect(huge + "\n8 9\n-1\n", {"t.pfm", "magic", "not a PFM file", "a text of 10006 bytes"});
+  expect("\x89PNG\x1a\x01\x02\n8 9\n-1\n", {"t.pfm", "magic", "'?PNG???'"});
+  expect("Pf\n" + huge + " 9\n-1\n", {"t.pfm", "width", "invalid value"});
+  expect("Pf\n8 \x1b[31m\x7f\n-1\n", {"t.pfm", "height", "invalid value '?[31m?'"});
+  expect("Pf\n8 9\n" + huge + "\n", {"t.pfm", "scale", "invalid value"});
+  // An EXR attribute name of 200 bytes (up to 255 with long names) with control bytes, its value truncated.
+  const fs::path exr = tmp.path() / "t.exr";
+  std::string bytes("\x76\x2f\x31\x01\x02\x04\x00\x00", 8);  // magic, version 2 with long names
+  bytes += "SECRET\n" + std::string(193, 'x') + '\0' + "box2i" + '\0' + std::string("\xff\xff\x00\x00", 4);
+  std::ofstream(exr, std::ios::binary) << bytes;
+  ExpectInputErrorWithoutEcho([&] { ReadExrHeader(exr); }, {"t.exr", "a text of 200 bytes", "truncated"},
+                              {"SECRET", "xxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxx"});
+}
+
 // A minimal OpenEXR header: magic, version 2, a one-channel chlist, a data
 // window, the end of the header (no pixel data).
 std::string ExrHeaderBytes(std::int32_t x1, std::int32_t y1, std::uint32_t version = 2) {

@@ -205,6 +205,41 @@ TEST(PlyBadInput, TruncatedAndCorrupt) {
   ExpectInputError([&] { ReadPly(p); }, {"m.ply", "not a PLY"});
 }
 
+// Tokens of the file quoted in errors (a bad value, a header keyword, an
+// element name) came out raw: binary bytes and any length. Now the error
+// names the file and position and quotes at most a short printable token.
+TEST(PlyBadInput, ErrorsDoNotEchoBinaryOrHugeTokens) {
+  TempDir tmp;
+  const fs::path p = tmp.path() / "t.ply";
+  const std::string binary("\x1b[2J\x01\xff", 6);  // a terminal escape and two control bytes
+  const std::string huge = "SECRET" + std::string(10000, 'x');      // 10 kB without white space
+  const std::string header = "ply\nformat ascii 1.0\n";
+  const std::string vertex = "element vertex 1\nproperty float x\nproperty float y\nproperty float z\n";
+  using testing::ExpectInputErrorWithoutEcho;
+  auto expect = [&](const std::string& bytes, const std::vector<std::string>& needles) {
+    std::ofstream(p, std::ios::binary) << bytes;
+    ExpectInputErrorWithoutEcho([&] { ReadPly(p); }, needles, {"SECRET", "xxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxx"});
+  };
+  // A value: the ASCII body.
+  expect(header + vertex + "end_header\n0 " + huge + " 0\n", {"t.ply", "vertex 0", "10006 bytes", "not a number"});
+  expect(header + vertex + "end_header\n0 \x01\x02\x03\xfe 0\n", {"t.ply", "vertex 0", "'????'"});
+  // The header's keywords, format, types and element lines.
+  expect("ply\nformat " + huge + " 1.0\n" + vertex + "end_header\n", {"t.ply", "header line 2", "unknown format"});
+  expect("ply\nformat " + binary + " 1.0\n" + vertex + "end_header\n",
+         {"t.ply", "header line 2", "unknown format '?[2J??'"});
+  expect(header + huge + "\n" + vertex + "end_header\n", {"t.ply", "header line 3", "unexpected header keyword"});
+  expect(header + "element v " + huge + "\nend_header\n", {"t.ply", "header line 3", "malformed element line"});
+  expect(header + vertex + "property " + huge + " w\nend_header\n",
+         {"t.ply", "header line 7", "unknown property type"});
+  expect(header + vertex + "property list " + huge + " int i\nend_header\n",
+         {"t.ply", "header line 7", "malformed list property"});
+  // An element's name in the field: more entries promised than the bytes left can hold.
+  expect(header + vertex + "element " + huge + " 2\nproperty list uchar int i\nend_header\n0 0 0\n",
+         {"t.ply", "element a text of 10006 bytes"});
+  expect(header + vertex + "element e\x1b\x07 99\nproperty float a\nend_header\n0 0 0\n1\n",
+         {"t.ply", "element 'e??'"});
+}
+
 // `f` in a child process: its exit code (0: InputError naming every needle; 1: other
 // outcome), or -1 if it did not finish within `seconds` (it is killed).
 int InputErrorWithin(const std::function<void()>& f, const std::vector<std::string>& needles, double seconds) {
