@@ -362,6 +362,51 @@ TEST(Masks, FolderAndAlphaChannelGiveTheSameV) {
   ExpectInputError([&] { again.ReadMask(2); }, {again.views()[2].name + ".png", "10x10"});
 }
 
+// Dataset::ReadMask checks a mask's header against its image before decoding
+// it: a mask whose header says 20000x20000 (1.2 GB as 8-bit RGB) or a size
+// that does not match is refused naming the file, from the header alone (the
+// files hold no pixels: a decoder would fail with "cannot be read").
+TEST(Masks, HeaderCheckedBeforeDecoding) {
+  TempDir tmp;
+  const Camera cam = Camera::Pinhole(80, 60, 70, 70, 40, 30);
+  const int n = 4;
+  WriteColmapDataset(tmp.path(), cam, n);
+  fs::create_directories(tmp.path() / "masks");
+  // V from scene.json: Open reads no mask.
+  std::ofstream(tmp.path() / "scene.json")
+      << R"({"foreground_bbox_min": [-0.2, -0.5, 0.0], "foreground_bbox_max": [0.4, 0.1, 0.6]})";
+  DatasetOptions options;
+  options.dataset_dir = tmp.path();
+  const Dataset probe = Dataset::Open(options);
+  for (int i = 0; i < n; ++i)
+    cv::imwrite((tmp.path() / "masks" / (probe.views()[i].name + ".png")).string(),
+                SphereMask(cam, probe.views()[i].cam_from_world));
+  const Dataset ds = Dataset::Open(options);
+  ASSERT_EQ(ds.mask_source(), "masks/");
+  ASSERT_EQ(ds.bbox_source(), "scene.json");
+  EXPECT_EQ(ds.ReadMask(0).size(), cv::Size(80, 60));
+  // A PNG signature and IHDR of 20000 x 20000, 8-bit RGB; no image data.
+  const std::string huge_name = ds.views()[1].name + ".png";
+  std::ofstream(tmp.path() / "masks" / huge_name, std::ios::binary)
+      << std::string("\x89PNG\r\n\x1a\n", 8)
+      << std::string("\x00\x00\x00\x0dIHDR\x00\x00\x4e\x20\x00\x00\x4e\x20\x08\x02\x00\x00\x00", 21)
+      << "\x00\x00\x00\x00 IDAT never decoded";
+  ExpectInputError([&] { ds.ReadMask(1); }, {huge_name, "mask header is 20000x20000", "80x60"});
+  // A BMP header (whatever the file's name says) of 81 x 60: one pixel too wide.
+  std::string bmp = "BM" + std::string(12, '\0');
+  for (const std::int32_t v : {40, 81, 60}) bmp += std::string(reinterpret_cast<const char*>(&v), 4);
+  bmp += std::string(28, '\0');
+  const std::string wide_name = ds.views()[2].name + ".png";
+  std::ofstream(tmp.path() / "masks" / wide_name, std::ios::binary) << bmp;
+  ExpectInputError([&] { ds.ReadMask(2); }, {wide_name, "mask header is 81x60", "80x60"});
+  // The same header with the right size is not refused by the check: it fails to decode.
+  bmp.replace(18, 4, std::string("\x50\x00\x00\x00", 4));
+  std::ofstream(tmp.path() / "masks" / wide_name, std::ios::binary) << bmp;
+  ExpectInputError([&] { ds.ReadMask(2); }, {wide_name, "mask cannot be read"});
+  // The other masks are still read.
+  EXPECT_EQ(ds.ReadMask(3).size(), cv::Size(80, 60));
+}
+
 // A JPEG whose EXIF says "rotate 90° clockwise to display" (orientation 6).
 std::string JpegWithExifOrientation(const cv::Mat& image, int orientation) {
   std::vector<uchar> jpg;
