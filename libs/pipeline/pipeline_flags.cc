@@ -15,6 +15,10 @@ PipelineOptions OptionsFromFlags(const ReconstructionFlags& f) {
   if (!(f.sigma_s >= 0) || !std::isfinite(f.sigma_s)) throw OptionError("sigma_s (--sigma-s) must be positive");
   if (f.sigma_s > 0) (options.densify ? options.dense_sigma_s : options.fusion.sigma_s) = f.sigma_s;
   options.selection.enabled = !f.all_views;
+  if (f.max_frame_gap) {
+    if (*f.max_frame_gap < 0) throw OptionError("--max-frame-gap must be >= 0 (0: no limit)");
+    options.depth.max_frame_gap = *f.max_frame_gap;
+  }
   options.Check();
   return options;
 }

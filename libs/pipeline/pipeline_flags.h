@@ -15,6 +15,10 @@ struct ReconstructionFlags {
   bool no_densify = false;         // fuse the filtered sparse maps (--no-densify)
   std::optional<int> color_views;  // frames that colour the mesh; unset: the default (--color-views)
   bool all_views = false;          // no view selection: every view gets depth and fusion (--all-views)
+  // Views further apart in the sequence are never neighbours (StreamingDepthOptions::max_frame_gap;
+  // 0: no limit); unset: the default (1000). An open stream's views are processed
+  // two gaps behind its newest frame (ReconstructionPlan::SettledFrames).
+  std::optional<int> max_frame_gap;
 };
 
 // PipelineOptions defaults with the flags applied; checked (PipelineOptions::Check). Throws OptionError.

@@ -74,4 +74,12 @@ int ReconstructionPlan::SettledFrames(int received, bool ended, const PipelineOp
   return static_cast<int>(std::max<long long>(0, received - 2 * gap));
 }
 
+int ReconstructionPlan::SettledDepthFrames(int received, bool ended, const PipelineOptions& options) {
+  if (received <= 0) return 0;
+  if (ended) return received;
+  const long long gap = options.depth.max_frame_gap;
+  if (gap <= 0 || !options.views.empty()) return 0;
+  return static_cast<int>(std::max<long long>(0, received - gap));
+}
+
 }  // namespace lfrecon

@@ -42,6 +42,13 @@ struct ReconstructionPlan {
   // nothing is final before the end. Colour and carving frames are final only
   // at the end. Only for options.views empty (an explicit list is not grown).
   static int SettledFrames(int received, bool ended, const PipelineOptions& options);
+  // The same for the depth stage alone: the leading frames whose need_sparse and
+  // depth neighbours are final (received - max_frame_gap; all at the end; none
+  // before the end without a gap limit or with given views). A sparse map computed
+  // then is the full plan's, so the voters of the SettledFrames views have
+  // theirs one gap earlier. Every received frame's selection and on_grid flag are
+  // final (greedy along the sequence): a worker may use them for any frame.
+  static int SettledDepthFrames(int received, bool ended, const PipelineOptions& options);
 
   int num_views() const { return static_cast<int>(selected.size()); }
   bool Selected(int i) const { return selected.at(static_cast<std::size_t>(i)) != 0; }

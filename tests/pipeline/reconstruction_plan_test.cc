@@ -182,5 +182,58 @@ TEST(ReconstructionPlan, PrefixPlanAgreesWithFullPlanOnSettledFrames) {
   EXPECT_EQ(ReconstructionPlan::SettledFrames(500, false, given), 0);
 }
 
+// The depth stage settles one gap earlier: on a prefix, the frames below
+// SettledDepthFrames have the full plan's need_sparse and depth neighbours, and
+// every received frame has the full plan's selection and on_grid flag (what a
+// worker reads for any frame it is given). A rule settling 2 frames more than
+// that disagrees somewhere.
+TEST(ReconstructionPlan, PrefixPlanAgreesWithFullPlanOnDepthSettledFrames) {
+  const int n = 1029;
+  const std::vector<PinholeView> cams = Arc(n, 0.35);
+  PipelineOptions o;
+  o.depth.max_frame_gap = 30;
+  const ReconstructionPlan full = ReconstructionPlan::Compute(cams, Box(), o);
+  const auto same_depth = [&](const ReconstructionPlan& a, int i) {
+    const auto at = [i](const auto& v) { return v.at(static_cast<std::size_t>(i)); };
+    return at(a.depth.need_sparse) == at(full.depth.need_sparse) && at(a.depth.uses) == at(full.depth.uses);
+  };
+  int checked = 0, greedy = 0, beyond = 0;
+  for (int p : {1, 30, 31, 45, 100, 200, 400, 700, 999, 1028}) {
+    const std::vector<PinholeView> prefix(cams.begin(), cams.begin() + p);
+    const ReconstructionPlan part = ReconstructionPlan::Compute(prefix, Box(), o);
+    const int settled = ReconstructionPlan::SettledDepthFrames(p, false, o);
+    EXPECT_EQ(settled, std::max(0, p - 30)) << p;
+    EXPECT_LE(ReconstructionPlan::SettledFrames(p, false, o), settled) << p;
+    for (int i = 0; i < settled; ++i, ++checked) EXPECT_TRUE(same_depth(part, i)) << "prefix " << p << " frame " << i;
+    for (int i = 0; i < p; ++i, ++greedy) {
+      EXPECT_EQ(part.selected[i], full.selected[i]) << "prefix " << p << " frame " << i;
+      EXPECT_EQ(part.depth.on_grid[i], full.depth.on_grid[i]) << "prefix " << p << " frame " << i;
+    }
+    for (int i = settled; i < std::min(p, settled + 2); ++i) beyond += !same_depth(part, i);
+  }
+  EXPECT_GT(checked, 3000);
+  EXPECT_GT(greedy, 3500);
+  EXPECT_GT(beyond, 0);
+  EXPECT_EQ(ReconstructionPlan::SettledDepthFrames(n, true, o), n);
+  PipelineOptions unbounded = o;
+  unbounded.depth.max_frame_gap = 0;
+  EXPECT_EQ(ReconstructionPlan::SettledDepthFrames(500, false, unbounded), 0);
+  PipelineOptions given = o;
+  given.views = {3};
+  EXPECT_EQ(ReconstructionPlan::SettledDepthFrames(500, false, given), 0);
+}
+
+// --max-frame-gap: the flag sets the bound (0: none); a negative one is refused.
+TEST(ReconstructionPlan, MaxFrameGapFlag) {
+  ReconstructionFlags f;
+  EXPECT_EQ(OptionsFromFlags(f).depth.max_frame_gap, StreamingDepthOptions{}.max_frame_gap);
+  f.max_frame_gap = 40;
+  EXPECT_EQ(OptionsFromFlags(f).depth.max_frame_gap, 40);
+  f.max_frame_gap = 0;
+  EXPECT_EQ(OptionsFromFlags(f).depth.max_frame_gap, 0);
+  f.max_frame_gap = -1;
+  EXPECT_THROW(OptionsFromFlags(f), OptionError);
+}
+
 }  // namespace
 }  // namespace lfrecon
