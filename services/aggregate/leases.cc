@@ -8,14 +8,21 @@
 #include <algorithm>
 #include <chrono>
 
+#include "io/input_text.h"
 #include "util/error.h"
 
 namespace lfrecon::svc {
 namespace fs = std::filesystem;
 
+// The name is the worker's own claim: its label (in logs, error replies and a
+// failed job's message) is sanitised and bounded (PeerText), so a name with
+// newlines or 10 kB of text can neither forge log lines nor bloat messages.
+constexpr std::size_t kMaxWorkerLabelChars = 64;
+
 Aggregator::WorkerId Aggregator::Worker(const std::string& peer_key, const std::string& name) {
-  if (peer_key.empty()) return {name, "'" + name + "'"};
-  return {"key:" + peer_key, "'" + name + "' (key " + KeyFingerprint(peer_key) + ")"};
+  const std::string label = "'" + PeerText(name, kMaxWorkerLabelChars) + "'";
+  if (peer_key.empty()) return {name, label};
+  return {"key:" + peer_key, label + " (key " + KeyFingerprint(peer_key) + ")"};
 }
 
 void Aggregator::ExpireLeases(Job& job) {
@@ -150,7 +157,8 @@ pb::Envelope Aggregator::HandleTaskResult(Job& job, const pb::TaskResult& r, con
   const auto lease = job.leases.find(key);
   if (!r.error().empty()) {
     if (lease != job.leases.end() && lease->second.worker.id == worker.id) job.leases.erase(lease);
-    if (!done) FailTask(job, key.first, v, worker.id, worker.label + ": " + r.error());
+    // The worker's error text is as untrusted as its name.
+    if (!done) FailTask(job, key.first, v, worker.id, worker.label + ": " + PeerText(r.error()));
     pb::Envelope ack = NewEnvelope(job.id);
     ack.mutable_ack();
     return ack;

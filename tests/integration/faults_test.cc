@@ -380,6 +380,64 @@ TEST_F(FaultsTest, ResultForAnotherWorkersLeaseIsRefusedByKey) {
   EXPECT_TRUE(JobStore(store_).HasMap(job, pb::MAP_SPARSE, v));
 }
 
+// A worker's name and its error text are its own claims: they reached the
+// aggregator's log, error replies and a failed job's message raw (a newline
+// forged log lines, 10 kB went into every line). Now both appear as
+// printable ASCII, cut to a bound with their length given.
+TEST_F(FaultsTest, WorkerNameAndErrorAreSanitisedAndBounded) {
+  DaemonProcess* agg = StartAggregator({"--max-task-attempts", "2"});
+  const std::string job = CreateJobWithFrames(pb::JobSpec());
+  const std::string forged = "[2026-12-03 00:00:00.000] [error] FORGED";
+  const std::string name = "w\n" + forged + "\x1b[31m\x07" + std::string(10000, 'N');
+  const std::string error = "bad\r\n" + forged + "\x1b]0;title\x07" + std::string(10000, 'E');
+  const std::vector<std::string> raw = {"\n" + forged, "\x1b", "\x07", "\r", std::string(100, 'N'),
+                                        std::string(300, 'E')};
+  auto expect_clean = [&](const std::string& text, const std::string& what) {
+    SCOPED_TRACE(what);
+    for (const std::string& r : raw) EXPECT_EQ(text.find(r), std::string::npos) << text.substr(0, 2000);
+  };
+  pb::Envelope tr = NewEnvelope();
+  tr.mutable_task_request()->set_stage(pb::STAGE_DEPTH);
+  tr.mutable_task_request()->set_worker(name);
+  // Its errors, until the job fails (a view fails twice: the same one, no other worker is there).
+  pb::JobStatus s;
+  for (int attempt = 0; attempt < 6 && s.state() != pb::STATE_FAILED; ++attempt) {
+    auto task = Ask(tr);
+    ASSERT_TRUE(task && task->has_task()) << (task && task->has_error() ? task->error().message() : "no task");
+    const int v = static_cast<int>(task->task().view());
+    if (attempt == 0) {  // a result for a view it does not hold: the error reply names it
+      auto r = Ask(Result(job, pb::STAGE_DEPTH, v + 1, name, v + 1, 96, 54));
+      ASSERT_TRUE(r && r->has_error());
+      EXPECT_NE(r->error().message().find("not leased to 'w?[2026-12-03 00:00:00.000] [error] FORGED?[31m?"),
+                std::string::npos)
+          << r->error().message();
+      const std::string cut = "... (" + std::to_string(name.size()) + " bytes)'";
+      EXPECT_NE(r->error().message().find(cut), std::string::npos) << r->error().message();
+      expect_clean(r->error().message(), "error reply");
+    }
+    pb::Envelope failed = Result(job, pb::STAGE_DEPTH, v, name, v, 96, 54);
+    failed.mutable_task_result()->clear_map();
+    failed.mutable_task_result()->set_error(error);
+    auto ack = Ask(failed);
+    ASSERT_TRUE(ack && ack->has_ack()) << (ack && ack->has_error() ? ack->error().message() : "no reply");
+    s = Status(job);
+  }
+  ASSERT_EQ(s.state(), pb::STATE_FAILED) << s.message();
+  EXPECT_NE(s.message().find("failed 2 times"), std::string::npos) << s.message();
+  EXPECT_NE(s.message().find("bad??[2026-12-03 00:00:00.000] [error] FORGED?]0;title?EEE"), std::string::npos)
+      << s.message();
+  EXPECT_NE(s.message().find("... (" + std::to_string(error.size()) + " bytes)"), std::string::npos) << s.message();
+  EXPECT_LT(s.message().size(), 600u) << s.message();
+  expect_clean(s.message(), "job message");
+  // The log (FailTask's warning, the job's end): every line the aggregator's own.
+  const std::string log = agg->Log();
+  EXPECT_NE(log.find("attempt 1 of 2"), std::string::npos) << agg->LogTail();
+  expect_clean(log, "log");
+  std::istringstream lines(log);
+  for (std::string line; std::getline(lines, line);)
+    EXPECT_EQ(line.rfind(forged, 0), std::string::npos) << "a forged log line: " << line.substr(0, 200);
+}
+
 // A worker error result used to fail the job at once: the view is retried on
 // another worker, and the job completes.
 TEST_F(FaultsTest, WorkerErrorIsRetriedOnAnotherWorker) {
