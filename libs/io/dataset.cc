@@ -415,7 +415,7 @@ Dataset Dataset::Open(const DatasetOptions& options) {
       if (!posed.count(n)) unposed.push_back(n);
     if (!unposed.empty())
       spdlog::warn("{}: {} images have no pose and are skipped (first: {})", ds.images_dir_.string(),
-                   unposed.size(), unposed.front());
+                   unposed.size(), InputToken(unposed.front()));
   } else {
     // A video has no names: view k is frame k, so every frame needs a pose.
     VideoSource video(ds.video_path_);

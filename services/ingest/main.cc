@@ -29,6 +29,7 @@
 #include "common/job_store.h"
 #include "common/messaging.h"
 #include "io/dataset.h"
+#include "io/input_text.h"
 #include "util/memory.h"
 #include "util/error.h"
 #include "util/logging.h"
@@ -61,11 +62,22 @@ struct IngestOptions {
   ClientSecurity to_aggregate;  // of the connections to the aggregator (the same key, role ingest)
 };
 
-// Refuses a submitted path outside every --data-root (after resolving "..",
-// "." and symbolic links, so neither can leave a root). The message names
-// the field, not what the path holds.
-void CheckUnderDataRoots(const std::vector<std::filesystem::path>& roots, const std::string& field,
-                         const std::string& path) {
+// Text for the log and a job's status that a client or peer influences (an
+// exception's text with a client's paths, the aggregator's error reply, a
+// stream's failure): printable ASCII, bounded (PeerText), so it cannot forge
+// log lines or carry kilobytes into every line.
+constexpr std::size_t kMaxReasonChars = 1024;
+std::string Reason(const std::string& text) { return PeerText(text, kMaxReasonChars); }
+
+// Refuses a submitted path that holds control characters (a newline or an
+// escape would reach every log line that names the dataset or its files), or
+// that lies outside every --data-root (after resolving "..", "." and symbolic
+// links, so neither can leave a root). The message names the field, not what
+// the path holds.
+void CheckSubmittedPath(const std::vector<std::filesystem::path>& roots, const std::string& field,
+                        const std::string& path) {
+  if (std::any_of(path.begin(), path.end(), [](char c) { return static_cast<unsigned char>(c) < 0x20 || c == 0x7f; }))
+    throw InputError(field, "a path with control characters (newline, escape, ...) is refused");
   if (roots.empty() || path.empty()) return;
   std::error_code ec;
   const std::filesystem::path p = std::filesystem::weakly_canonical(std::filesystem::absolute(path), ec);
@@ -84,7 +96,8 @@ bool Notify(RequestClient& client, const pb::Envelope& env, const JobStore& stor
     auto reply = client.Request(env, std::chrono::milliseconds(2000));
     if (reply) {
       if (reply->has_error())
-        spdlog::warn("ingest: job {}: aggregator refused {}: {}", id, BodyName(env), reply->error().message());
+        spdlog::warn("ingest: job {}: aggregator refused {}: {}", id, BodyName(env),
+                     Reason(reply->error().message()));
       return true;
     }
     if (store.ReadText(id, "cancelled")) return false;
@@ -132,9 +145,10 @@ void Spool(zmq::context_t& context, const IngestOptions& o, const JobStore& stor
     spdlog::info("ingest: job {}: {} frames spooled in {:.1f} s ({:.0f} bytes a frame)", id, spooled, timer.Seconds(),
                  spooled - kept > 0 ? bytes / (spooled - kept) : 0.0);
   } catch (const std::exception& e) {
-    spdlog::error("ingest: job {}: {}", id, e.what());
+    const std::string why = Reason(e.what());
+    spdlog::error("ingest: job {}: {}", id, why);
     pb::Envelope env = NewEnvelope(id);
-    env.mutable_ingest_failed()->set_message(e.what());
+    env.mutable_ingest_failed()->set_message(why);
     Notify(agg, env, store, id);
   }
 }
@@ -190,7 +204,8 @@ pb::Envelope RequestErrorReply(pb::ErrorCode input_code) {
 using Clock = std::chrono::steady_clock;
 
 // A stream's end recorded by ingest (the aggregator never loaded the job): status.pb, FAILED.
-void FailStreamJob(const JobStore& store, const std::string& id, int stored, const std::string& why) {
+void FailStreamJob(const JobStore& store, const std::string& id, int stored, const std::string& reason) {
+  const std::string why = Reason(reason);
   pb::JobStatus st;
   st.set_state(pb::STATE_FAILED);
   st.set_frames_spooled(static_cast<std::uint32_t>(stored));
@@ -198,7 +213,7 @@ void FailStreamJob(const JobStore& store, const std::string& id, int stored, con
   try {
     store.WriteText(id, "status.pb", st.SerializeAsString());
   } catch (const std::exception& e) {
-    spdlog::error("ingest: stream {}: cannot record its failure: {}", id, e.what());
+    spdlog::error("ingest: stream {}: cannot record its failure: {}", id, Reason(e.what()));
   }
   spdlog::error("ingest: stream {} failed: {}", id, why);
 }
@@ -319,7 +334,7 @@ void StreamWriter(zmq::context_t& context, const IngestOptions& o, const JobStor
           store.WriteText(id, "ingest.done", std::to_string(n));
           store.WriteManifest(m);
         } catch (const std::exception& e) {
-          why = e.what();
+          why = Reason(e.what());
         }
       }
       if (!why.empty()) {
@@ -475,8 +490,8 @@ int Serve(const IngestOptions& o) {
       spdlog::info("ingest: resuming job {} ({} views)", id, ds->NumViews());
       start([&context, &o, &store, id, ds] { Spool(context, o, store, id, ds, true); });
     } catch (const std::exception& ex) {  // the job fails with the reason, it does not wait for ever
-      spdlog::error("ingest: cannot resume job {}: {}", id, ex.what());
-      const std::string why = std::string("ingest restarted and cannot resume the job: ") + ex.what();
+      spdlog::error("ingest: cannot resume job {}: {}", id, Reason(ex.what()));
+      const std::string why = "ingest restarted and cannot resume the job: " + Reason(ex.what());
       start([&context, &o, &store, id, why] {
         RequestClient to(context, o.aggregate, o.max_message_bytes, o.to_aggregate);
         pb::Envelope env = NewEnvelope(id);
@@ -503,11 +518,11 @@ int Serve(const IngestOptions& o) {
       const pb::JobSpec& spec = in->envelope.submit().spec();
       try {
         CheckAdmission(static_cast<int>(spoolers.size()), "spooled", store, o, "submit again later");
-        CheckUnderDataRoots(o.data_roots, "dataset_dir", spec.dataset_dir());
-        CheckUnderDataRoots(o.data_roots, "images_dir", spec.images_dir());
-        CheckUnderDataRoots(o.data_roots, "video_path", spec.video_path());
-        CheckUnderDataRoots(o.data_roots, "colmap_dir", spec.colmap_dir());
-        CheckUnderDataRoots(o.data_roots, "transforms_path", spec.transforms_path());
+        CheckSubmittedPath(o.data_roots, "dataset_dir", spec.dataset_dir());
+        CheckSubmittedPath(o.data_roots, "images_dir", spec.images_dir());
+        CheckSubmittedPath(o.data_roots, "video_path", spec.video_path());
+        CheckSubmittedPath(o.data_roots, "colmap_dir", spec.colmap_dir());
+        CheckSubmittedPath(o.data_roots, "transforms_path", spec.transforms_path());
         auto ds = std::make_shared<Dataset>(Dataset::Open(ToDatasetOptions(spec)));
         // Every option validated (with V) before the job is accepted.
         JobFusionOptions(JobPipelineOptions(spec.options()), ds->bbox());

@@ -268,6 +268,28 @@ TEST_F(FaultsTest, IngestErrorRepliesDoNotEchoTheFile) {
   EXPECT_TRUE(procs_[1]->Running());
 }
 
+// A transforms.json with a value nested 10^6 deep crashed the ingest daemon
+// (SIGSEGV: every job it spooled died). The submission is refused naming the
+// file; the daemon keeps serving.
+TEST_F(FaultsTest, IngestRefusesDeeplyNestedJsonAndKeepsServing) {
+  StartAggregator();
+  DaemonProcess* ing = StartIngest();
+  const fs::path ds = tmp_->path() / "deep";
+  fs::copy(g_ref.dataset, ds, fs::copy_options::recursive);
+  fs::remove_all(ds / "sparse");  // transforms.json is read only without a COLMAP model
+  {
+    std::ofstream f(ds / "transforms.json", std::ios::binary);
+    f << R"({"fl_x": )" << std::string(1000000, '[') << std::string(1000000, ']') << R"(, "frames": []})";
+  }
+  const auto r = lfrecon::testing::RunShell(kBin + "lfrecon -q submit --ingest " + ing_ + " --dataset " + ds.string());
+  EXPECT_EQ(r.code, 1) << r.output;
+  EXPECT_NE(r.output.find("transforms.json"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("nested deeper than"), std::string::npos) << r.output;
+  EXPECT_TRUE(ing->Running());
+  EXPECT_TRUE(Ping(ing_));
+  Submit();  // still serving: a good dataset is taken
+}
+
 TEST_F(FaultsTest, ResultMustMatchItsLease) {
   StartAggregator();
   const std::string job = CreateJobWithFrames(pb::JobSpec());
@@ -622,6 +644,73 @@ TEST_F(FaultsTest, IngestKilledMidJobResumesOnRestart) {
   EXPECT_EQ(s.views_fused(), static_cast<unsigned>(g_ref.views));
   EXPECT_EQ(fs::last_write_time(frame0), written);  // kept, not spooled again
   EXPECT_EQ(TempFiles(store_), 0);
+}
+
+// A job whose frame cannot be read mid-spool fails with the reason, which
+// holds the client's paths: it reached ingest's log and the job's message raw
+// (a file name with a newline forged a log line). Now printable ASCII, cut
+// after 1024 characters with the length given; a submitted path with control
+// characters is refused.
+TEST_F(FaultsTest, IngestFailureReasonIsSanitisedAndBounded) {
+  StartAggregator();
+  DaemonProcess* ing = StartIngest({"--frame-delay-ms", "30"});
+  const std::string forged = "[2026-12-03 00:00:00.000] [error] FORGED";
+  auto submit = [&](const fs::path& ds) {
+    // The path through the environment: the shell keeps a newline and an escape.
+    ::setenv("LFRECON_TEST_DATASET", ds.c_str(), 1);
+    auto r = lfrecon::testing::RunShell(kBin + "lfrecon -q submit --ingest " + ing_ +
+                                        " --dataset \"$LFRECON_TEST_DATASET\" --voxel-mm 8");
+    ::unsetenv("LFRECON_TEST_DATASET");
+    return r;
+  };
+  const fs::path bad_dir = tmp_->path() / ("ds\n" + forged + "\x1b[31m");
+  fs::copy(g_ref.dataset, bad_dir, fs::copy_options::recursive);
+  const auto refused = submit(bad_dir);
+  EXPECT_EQ(refused.code, 1) << refused.output;
+  EXPECT_NE(refused.output.find("dataset_dir: a path with control characters"), std::string::npos) << refused.output;
+
+  // A dataset 3 folders of 240 characters deep, its last image renamed (in
+  // transforms.json too) to a name of 251 bytes with a newline and an escape.
+  fs::path ds = tmp_->path() / "ds";
+  for (int k = 0; k < 3; ++k) ds /= std::string(240, 'D');
+  fs::create_directories(ds.parent_path());
+  fs::copy(g_ref.dataset, ds, fs::copy_options::recursive);
+  fs::remove_all(ds / "sparse");  // poses from transforms.json
+  fs::path last;
+  for (const auto& e : fs::directory_iterator(ds / "images")) last = std::max(last, e.path());
+  ASSERT_FALSE(last.empty());
+  const std::string tail = std::string(200, 'F') + ".png";
+  const fs::path renamed = ds / "images" / ("x\n" + forged + "\x1b[31m" + tail);
+  fs::rename(last, renamed);
+  std::string transforms = ReadFileBytes(ds / "transforms.json");
+  const std::string old_path = "\"images/" + last.filename().string() + "\"";
+  const auto at = transforms.find(old_path);
+  ASSERT_NE(at, std::string::npos);
+  transforms.replace(at, old_path.size(), "\"images/x\\n" + forged + "\\u001b[31m" + tail + "\"");
+  std::ofstream(ds / "transforms.json", std::ios::binary | std::ios::trunc) << transforms;
+  const auto r = submit(ds);
+  ASSERT_EQ(r.code, 0) << r.output;
+  std::string job = r.output;
+  job.erase(job.find_last_not_of("\n") + 1);
+  job.erase(0, job.find_last_of('\n') + 1);  // the last line
+  ASSERT_TRUE(JobStore::ValidJobId(job)) << r.output;
+  // That image cut to 40 bytes while the first ones are spooled (30 ms each): not decodable.
+  const std::string bytes = ReadFileBytes(renamed);
+  std::ofstream(renamed, std::ios::binary | std::ios::trunc) << bytes.substr(0, 40);
+  const pb::JobStatus s = WaitEnded(job, 60);
+  ASSERT_EQ(s.state(), pb::STATE_FAILED) << s.message();
+  EXPECT_NE(s.message().find("x?" + forged + "?[31mFFF"), std::string::npos) << s.message();
+  EXPECT_NE(s.message().find("... ("), std::string::npos) << s.message();
+  EXPECT_LT(s.message().size(), 1100u) << s.message();
+  const std::string log = ing->Log();
+  EXPECT_NE(log.find("x?" + forged), std::string::npos) << ing->LogTail();
+  for (const std::string& text : {s.message(), log})
+    for (const std::string& raw : {"\n" + forged, std::string("\x1b")})
+      EXPECT_EQ(text.find(raw), std::string::npos) << text.substr(0, 3000);
+  std::istringstream lines(log);
+  for (std::string line; std::getline(lines, line);)
+    EXPECT_EQ(line.rfind(forged, 0), std::string::npos) << "a forged log line: " << line.substr(0, 200);
+  EXPECT_TRUE(ing->Running());
 }
 
 // Ingest killed and never restarted: the job fails with the reason instead of waiting for ever.
