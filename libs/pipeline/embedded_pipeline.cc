@@ -16,6 +16,7 @@
 #include "fusion/mesh_render.h"
 #include "pipeline/finish_surface.h"
 #include "pipeline/reconstruction_plan.h"
+#include "propagation/edge_preview.h"
 #include "io/depth_map_io.h"
 #include "io/ply.h"
 #include "util/error.h"
@@ -117,9 +118,12 @@ bool UsableWindowFrame(const WindowFrame& w) {
 // bit, with the photoconsistency fed one neighbour at a time: each neighbour's
 // float frame (and pre-smoothed copy) is made, added and dropped before the
 // next, so only one exists at once (§4.1 reads them together otherwise).
+// `edge_classes` (if not null): the edges' classes (EdgeConsistency::Classify)
+// for a preview; left empty when the input is not usable.
 DepthMap DensifyNeighbourByNeighbour(const DepthPropagator& propagator, const ViewImage& reference,
                                      const std::vector<const WindowFrame*>& neighbours, const DepthMap& filtered,
-                                     const BoundingBox& volume, const GradientDepthOptions& go) {
+                                     const BoundingBox& volume, const GradientDepthOptions& go,
+                                     cv::Mat* edge_classes = nullptr) {
   const PropagationOptions& options = propagator.options();
   const int rows = reference.image.rows, cols = reference.image.cols;
   if (!DepthPropagator::ValidInput(reference, filtered)) return DepthMap(rows, cols);
@@ -138,6 +142,7 @@ DepthMap DensifyNeighbourByNeighbour(const DepthPropagator& propagator, const Vi
   for (int j : photo.SelectNeighbors(reference.view, views))
     acc.Add(MaterializeWindowFrame(*usable[static_cast<std::size_t>(j)], go, options.photo, false));
   const EdgeConsistency edges = acc.Finish();
+  if (edge_classes) *edge_classes = edges.Classify(options.photo.silhouette_ratio);
   DepthMap dense = propagator.Filter(reference.image, propagator.Splat(labelled, edges));
   if (options.consistency.views > 0) {  // second pass, again one neighbour at a time
     DenseConsistencyAccumulator check(options.consistency);
@@ -174,6 +179,16 @@ PipelineResult EmbeddedPipeline::Run(FrameSource& frames) {
   if (write) fs::create_directories(options_.out_dir);
   if (write && options_.write_depth)
     for (const char* sub : {"depth", "confidence"}) fs::create_directories(options_.out_dir / sub);
+  // Previews for report.html: a few views evenly spread over those processed.
+  std::set<int> preview_ids;
+  if (write && !wanted.empty())
+    for (std::size_t k = 0, m = std::min<std::size_t>(options_.preview_views, wanted.size()); k < m; ++k)
+      preview_ids.insert(wanted[k * wanted.size() / m]);
+  if (!preview_ids.empty()) {
+    fs::create_directories(options_.out_dir / "preview");
+    if (options_.densify) fs::create_directories(options_.out_dir / "edges");
+  }
+  auto stem_of = [&](int i) { return names_.empty() ? DefaultStem(i) : fs::path(names_[i]).stem().string(); };
 
   // The densification window: frame j is kept while a view that needs it
   // (itself or a view within the photoconsistency angle) is still pending.
@@ -206,6 +221,7 @@ PipelineResult EmbeddedPipeline::Run(FrameSource& frames) {
         st.sparse_pixels += sparse.CountValid();
         st.filtered_pixels += filtered.CountValid();
         DepthMap fused_map;
+        const bool preview = preview_ids.count(i) > 0;
         if (options_.densify) {
           Timer t;
           // Float frames exist only while this view is densified, and of
@@ -226,9 +242,13 @@ PipelineResult EmbeddedPipeline::Run(FrameSource& frames) {
             reference.view = views_[i];
             reference.image = image;
           }
-          fused_map = DensifyNeighbourByNeighbour(propagator, reference, nbs, base, volume_, go);
+          cv::Mat edge_classes;
+          fused_map = DensifyNeighbourByNeighbour(propagator, reference, nbs, base, volume_, go,
+                                                  preview ? &edge_classes : nullptr);
           st.seconds_densify += t.Seconds();
           st.cpu_densify += t.CpuSeconds();
+          if (preview && !edge_classes.empty())
+            WriteEdgePreview(options_.out_dir / "edges" / (stem_of(i) + ".png"), reference.image, edge_classes);
           for (int j : plan.PhotoNeighbours(i))
             if (--refcount[j] == 0) window.erase(j);
           if (--refcount[i] == 0) window.erase(i);
@@ -254,10 +274,12 @@ PipelineResult EmbeddedPipeline::Run(FrameSource& frames) {
         st.seconds_fusion += t.Seconds();
         st.cpu_fusion += t.CpuSeconds();
         if (write && options_.write_depth) {
-          const std::string stem = names_.empty() ? DefaultStem(i) : fs::path(names_[i]).stem().string();
+          const std::string stem = stem_of(i);
           WritePfm(options_.out_dir / "depth" / (stem + ".pfm"), fused_map.depth);
           WritePfm(options_.out_dir / "confidence" / (stem + ".pfm"), fused_map.confidence);
         }
+        if (preview && fused_map.CountValid() > 0)
+          WriteDepthPreview(options_.out_dir / "preview" / (stem_of(i) + ".png"), fused_map.depth, image);
         ++done;
         if (view_callback_) view_callback_(i, done, static_cast<int>(wanted.size()));
       });
@@ -389,6 +411,7 @@ PipelineResult EmbeddedPipeline::Run(FrameSource& frames) {
         {"occupied_voxels", st.refine.occupied_voxels},
         {"carving_region_voxels", st.refine.region_voxels},
         {"carved_voxels", st.refine.carved},
+        {"preview_views", preview_ids.size()},
         {"carved_per_round", st.refine.carved_per_round},
         {"poisson_points", st.refine.poisson_points},
         {"poisson_depth", st.refine.poisson_depth}}},

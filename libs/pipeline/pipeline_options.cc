@@ -16,6 +16,7 @@ void PipelineOptions::Check() const {
   if (color_views < 0) throw OptionError("color_views must be >= 0");
   if (refine) refine_options.Check();
   if (carving_views < 0) throw OptionError("carving_views must be >= 0");
+  if (preview_views < 0) throw OptionError("preview_views must be >= 0");
   selection.Check();
   if (!extra_report.is_object()) throw OptionError("extra_report must be a JSON object");
   if (!(dense_sigma_s > 0)) throw OptionError("dense_sigma_s must be positive");

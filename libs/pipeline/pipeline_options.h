@@ -156,6 +156,12 @@ struct PipelineOptions {
   bool write_depth = false;  // OUT/depth/<stem>.pfm and OUT/confidence/<stem>.pfm of the fused maps
   bool write_vdb = true;
   bool write_turntable = true;  // OUT/mesh_turntable.png: four shaded views of the final mesh
+  // Previews for a person of this many views, evenly spread over the processed
+  // ones (report.html shows them): OUT/preview/<stem>.png, the frame beside its
+  // fused depth map (turbo), and, when densifying, OUT/edges/<stem>.png, the
+  // dense stage's edges (§4.1: silhouette orange, texture blue), as
+  // `lfrecon depth --stage dense` writes them. 0: none.
+  int preview_views = 4;
   // Fields added to report.json (an object; e.g. the CLI's pose refinement figures), written with it once.
   nlohmann::json extra_report = nlohmann::json::object();
 

@@ -131,7 +131,8 @@ fs::path WriteReportHtml(const fs::path& out, const ReportHtmlOptions& o) {
   h << "<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\"><title>lfrecon report: "
     << Escape(out.filename().string()) << "</title>\n<style>body{font-family:sans-serif;margin:2em;max-width:70em}"
     << "table{border-collapse:collapse}td,th{border:1px solid #bbb;padding:.2em .6em;text-align:right}"
-    << "th:first-child,td:first-child{text-align:left}figure{display:inline-block;margin:.5em}"
+    << "th:first-child,td:first-child{text-align:left}figure{display:inline-block;margin:.5em;vertical-align:top}"
+    << ".view{display:inline-block;vertical-align:top}"
     << "img{max-width:100%;border:1px solid #ddd}</style></head><body>\n";
   h << "<h1>lfrecon report</h1>\n<p>Run folder <code>" << Escape(fs::absolute(out).string()) << "</code>";
   if (report.contains("views"))
@@ -143,8 +144,8 @@ fs::path WriteReportHtml(const fs::path& out, const ReportHtmlOptions& o) {
       << " triangles";
   h << ".</p>\n";
 
-  // Mesh preview.
-  h << "<h2>Mesh</h2>\n";
+  // The mesh, and beside it a few views' depth and edges.
+  h << "<h2>Mesh, depth and edges</h2>\n";
   const fs::path turntable = out / "mesh_turntable.png";
   std::error_code ec;
   if (fs::is_regular_file(turntable, ec)) {
@@ -154,6 +155,36 @@ fs::path WriteReportHtml(const fs::path& out, const ReportHtmlOptions& o) {
   } else {
     h << "<p>No turntable render (mesh_turntable.png).</p>\n";
   }
+  // Depth and edge previews of a few views, each view's side by side: the views
+  // of preview/ (lfrecon run and lfrecon depth write it), else of depth/ (PFM:
+  // lfrecon run --write-depth), else of edges/.
+  std::vector<fs::path> previewed = Spread(out / "preview", ".png", o.max_previews);
+  if (previewed.empty()) previewed = Spread(out / "depth", ".pfm", o.max_previews);
+  if (previewed.empty()) previewed = Spread(out / "edges", ".png", o.max_previews);
+  if (previewed.empty())
+    h << "<p>No depth or edge previews in this folder (lfrecon run --previews N writes them).</p>\n";
+  for (const fs::path& p : previewed) {
+    const std::string stem = p.stem().string();
+    const fs::path preview = out / "preview" / (stem + ".png"), pfm = out / "depth" / (stem + ".pfm"),
+                   edges = out / "edges" / (stem + ".png");
+    h << "<div class=\"view\">";
+    if (fs::is_regular_file(preview, ec)) {
+      const cv::Mat d = cv::imread(preview.string(), cv::IMREAD_COLOR);
+      if (d.empty()) throw InputError(preview.string(), "cannot read the depth preview");
+      h << "<figure>" << ImgTag(d, "depth " + stem) << "<figcaption>depth " << Escape(stem)
+        << " (frame and fused depth, turbo, 2nd-98th percentile)</figcaption></figure>";
+    } else if (fs::is_regular_file(pfm, ec)) {
+      h << "<figure>" << ImgTag(ColorizeMap(ReadPfm(pfm)), "depth " + stem) << "<figcaption>depth " << Escape(stem)
+        << " (turbo, 2nd-98th percentile)</figcaption></figure>";
+    }
+    if (fs::is_regular_file(edges, ec)) {
+      const cv::Mat e = cv::imread(edges.string(), cv::IMREAD_COLOR);
+      if (e.empty()) throw InputError(edges.string(), "cannot read the edge preview");
+      h << "<figure>" << ImgTag(e, "edges " + stem) << "<figcaption>edges " << Escape(stem)
+        << " (dense stage: silhouette orange, texture blue)</figcaption></figure>";
+    }
+    h << "</div>\n";
+  }
   std::vector<std::string> files;
   for (const char* f : {"mesh.ply", "mesh.obj", "mesh.glb", "mesh_raw.ply", "points.ply", "grid.vdb"})
     if (fs::is_regular_file(out / f, ec)) files.push_back(f);
@@ -161,26 +192,6 @@ fs::path WriteReportHtml(const fs::path& out, const ReportHtmlOptions& o) {
   h << "<p>Files: ";
   for (std::size_t i = 0; i < files.size(); ++i) h << (i ? ", " : "") << "<code>" << Escape(files[i]) << "</code>";
   h << "</p>\n";
-
-  // Depth and edge previews.
-  const auto depth = Spread(out / "depth", ".pfm", o.max_previews);
-  const auto edges = Spread(out / "edges", ".png", o.max_previews);
-  h << "<h2>Depth</h2>\n";
-  if (depth.empty()) h << "<p>No depth maps in this folder (lfrecon run --write-depth writes them).</p>\n";
-  for (const fs::path& p : depth) {
-    const cv::Mat map = ReadPfm(p);
-    h << "<figure>" << ImgTag(ColorizeMap(map), "depth " + p.stem().string()) << "<figcaption>depth "
-      << Escape(p.stem().string()) << " (turbo, 2nd-98th percentile)</figcaption></figure>\n";
-  }
-  if (!edges.empty()) {
-    h << "<h2>Edges</h2>\n";
-    for (const fs::path& p : edges) {
-      const cv::Mat e = cv::imread(p.string(), cv::IMREAD_COLOR);
-      if (e.empty()) continue;
-      h << "<figure>" << ImgTag(e, "edges " + p.stem().string()) << "<figcaption>edges " << Escape(p.stem().string())
-        << " (silhouette orange, texture blue)</figcaption></figure>\n";
-    }
-  }
 
   // Times and memory.
   h << "<h2>Time and memory</h2>\n<table><tr><th>stage</th><th>seconds</th><th>share</th></tr>\n";
@@ -260,7 +271,7 @@ void AddReportCommand(CLI::App& root, int* exit_code) {
   };
   auto a = std::make_shared<Args>();
   auto* cmd = root.add_subcommand("report", "Write RUN/report.html from a run folder (lfrecon run writes it too)");
-  cmd->add_option("--run", a->run, "Run folder (report.json, mesh_turntable.png, depth/, edges/, eval.json)")->required();
+  cmd->add_option("--run", a->run, "Run folder (report.json, mesh_turntable.png, preview/, depth/, edges/, eval.json)")->required();
   cmd->add_option("--gt", a->gt, "Ground-truth mesh to score RUN/mesh.ply against (else RUN/eval.json if present)");
   cmd->add_option("--gt-thin", a->gt_thin, "Its thin parts (thin-feature recall)");
   cmd->add_option("--previews", a->previews, "Depth and edge previews shown")->capture_default_str();

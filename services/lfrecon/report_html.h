@@ -1,8 +1,9 @@
 #pragma once
 // OUT/report.html: one self-contained page (images as data URIs) a person opens
-// in a browser: the turntable render, depth previews (and edge previews when the
-// folder has edges/), per-stage times and memory from report.json, and the
-// evaluation against ground truth when there is one.
+// in a browser: the turntable render and beside it a few views' depth and edge
+// previews (preview/ and edges/, which lfrecon run writes; else depth/*.pfm),
+// per-stage times and memory from report.json, and the evaluation against
+// ground truth when there is one.
 #include <filesystem>
 #include <optional>
 
@@ -17,7 +18,7 @@ struct ReportHtmlOptions {
 };
 
 // Reads OUT/report.json (InputError naming it if absent or malformed) and
-// whatever of mesh_turntable.png, depth/*.pfm, edges/*.png, eval.json is in
+// whatever of mesh_turntable.png, preview/*.png, depth/*.pfm, edges/*.png, eval.json is in
 // `out`; writes OUT/report.html and returns its path.
 std::filesystem::path WriteReportHtml(const std::filesystem::path& out, const ReportHtmlOptions& options);
 

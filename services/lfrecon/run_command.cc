@@ -112,6 +112,7 @@ int RunPipeline(const RunArgs& args) {
     if (!args.out.empty()) WriteRefinedModel(ds, views, args.out / "sparse_refined");
   }
   if (args.no_mask_free_space) options.mask_free_space.confidence = 0;
+  options.preview_views = args.outputs.previews;
   EmbeddedPipeline pipeline(views, ds.bbox(), options, names);
   if (ds.HasMasks() && options.mask_free_space.confidence > 0) {
     spdlog::info("run: masks from {}: free space outside them in fusion", ds.mask_source());

@@ -29,6 +29,11 @@ void RunOutputFlags::AddTo(CLI::App* app) {
                 "stereo/depth_maps and normal_maps as NAME.geometric.bin) for colmap stereo_fusion or "
                 "OpenMVS (implies --write-depth)");
   app->add_flag("--no-report-html", no_report_html, "Do not write OUT/report.html");
+  app->add_option("--previews", previews,
+                  "Views (evenly spread over those processed) with a depth preview (OUT/preview/) and an edge "
+                  "preview of the dense stage (OUT/edges/), shown in report.html; 0: none")
+      ->capture_default_str()
+      ->check(CLI::NonNegativeNumber);
 }
 
 std::vector<std::string> RunOutputFlags::MeshFormats() const {
@@ -91,7 +96,11 @@ void WriteRunOutputs(const RunOutputFlags& flags, const Dataset& ds, const std::
     }
   }
   if (!flags.no_report_html) {
-    const fs::path html = WriteReportHtml(out, ReportHtmlOptions{ds.GroundTruthMeshPath(), ds.GroundTruthMeshPath(true)});
+    ReportHtmlOptions ro;
+    ro.gt_mesh = ds.GroundTruthMeshPath();
+    ro.gt_thin = ds.GroundTruthMeshPath(true);
+    ro.max_previews = flags.previews;
+    const fs::path html = WriteReportHtml(out, ro);
     spdlog::info("wrote {}", html.string());
   }
 }

@@ -17,6 +17,7 @@ struct RunOutputFlags {
   bool point_cloud = false;         // OUT/points.ply from the fused depth maps
   bool export_depth_colmap = false; // OUT/colmap/: a COLMAP dense workspace
   bool no_report_html = false;
+  int previews = 4;                 // views with depth and edge previews (OUT/preview/, OUT/edges/)
 
   void AddTo(CLI::App* app);
   // The formats asked for, checked (OptionError naming --mesh-format).

@@ -1,17 +1,21 @@
-// report.html (issue 17): written from a run folder by `lfrecon report`
-// (`lfrecon run` writes it too), loaded in headless Chromium, which must decode
-// every image on the page; and `lfrecon run`'s export flags.
+// report.html (issue 17): written from a run folder by `lfrecon report` and by
+// `lfrecon run` (with its own depth and edge previews), loaded in headless
+// Chromium, which must decode every image on the page; and `lfrecon run`'s
+// export flags.
 #include <gtest/gtest.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <array>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <optional>
 #include <regex>
 #include <sstream>
 #include <string>
+#include <vector>
 
 namespace {
 
@@ -59,6 +63,15 @@ std::string Chromium() {
   return "";
 }
 
+// A PNG's width from its IHDR chunk (big-endian, bytes 16-19).
+int PngWidth(const fs::path& png) {
+  const std::string b = ReadFile(png);
+  if (b.size() < 24 || b.substr(1, 3) != "PNG") return -1;
+  int w = 0;
+  for (int k = 16; k < 20; ++k) w = (w << 8) | static_cast<unsigned char>(b[static_cast<std::size_t>(k)]);
+  return w;
+}
+
 // A run folder with every part the page shows: report.json, the turntable,
 // a depth map and an edge preview (from `lfrecon depth --stage dense`), and
 // the ground truth as mesh.ply (so the evaluation is perfect).
@@ -79,6 +92,38 @@ void MakeRunFolder(const fs::path& data, const fs::path& run) {
   })";
 }
 
+// `html` loaded in headless Chromium: how many images decoded, and "alt=decoded
+// width" of each in page order (the page's script writes both). Empty optional
+// when Chromium is not installed.
+struct LoadedPage {
+  std::string images_loaded;
+  std::vector<std::string> widths;
+};
+std::optional<LoadedPage> LoadInChromium(const fs::path& html, const fs::path& profile) {
+  const std::string chromium = Chromium();
+  if (chromium.empty()) return std::nullopt;
+  const Result dom = Shell("timeout 120 " + chromium +
+                           " --headless --no-sandbox --disable-gpu --no-first-run --disable-background-networking"
+                           " --user-data-dir=" + profile.string() +
+                           " --virtual-time-budget=5000 --dump-dom file://" + html.string() + " 2>/dev/null");
+  EXPECT_EQ(dom.code, 0) << dom.output.substr(0, 2000);
+  LoadedPage page;
+  std::smatch m;
+  if (std::regex_search(dom.output, m, std::regex("data-images-loaded=\"(\\d+)\"")))
+    page.images_loaded = m[1];
+  else
+    ADD_FAILURE() << "no data-images-loaded in " << dom.output.substr(0, 2000);
+  const std::regex w("alt=\"([^\"]*)\"[^>]*data-natural-width=\"(\\d+)\"");
+  for (auto it = std::sregex_iterator(dom.output.begin(), dom.output.end(), w); it != std::sregex_iterator(); ++it)
+    page.widths.push_back((*it)[1].str() + "=" + (*it)[2].str());
+  return page;
+}
+
+long CountMatches(const std::string& text, const std::string& re) {
+  const std::regex r(re);
+  return std::distance(std::sregex_iterator(text.begin(), text.end(), r), std::sregex_iterator());
+}
+
 TEST(ReportHtml, ChromiumLoadsEveryImage) {
   Dir tmp("chromium");
   const fs::path data = tmp.path / "data", run = tmp.path / "run";
@@ -87,37 +132,62 @@ TEST(ReportHtml, ChromiumLoadsEveryImage) {
   ASSERT_EQ(r.code, 0) << r.output;
   const std::string html = ReadFile(run / "report.html");
   // Self-contained: images are data URIs, no file links.
-  auto count = [&](const std::string& re) {
-    const std::regex r(re);
-    return std::distance(std::sregex_iterator(html.begin(), html.end(), r), std::sregex_iterator());
-  };
-  EXPECT_EQ(count("<img "), 3);  // turntable, depth, edges
-  EXPECT_EQ(count("<img src=\"data:image/png;base64,"), 3);
+  EXPECT_EQ(CountMatches(html, "<img "), 3);  // turntable, depth, edges
+  EXPECT_EQ(CountMatches(html, "<img src=\"data:image/png;base64,"), 3);
   // Figures from report.json and the evaluation of the ground truth against itself.
   EXPECT_NE(html.find("<td>depth_sparse</td><td>12.50</td><td>50.0 %</td>"), std::string::npos);
   EXPECT_NE(html.find("Peak memory (RSS) 300 MiB"), std::string::npos);
   EXPECT_NE(html.find("<td>5 mm</td><td>1.000</td><td>1.000</td><td>1.000</td>"), std::string::npos);
   EXPECT_TRUE(fs::exists(run / "eval.json"));
 
-  const std::string chromium = Chromium();
-  if (chromium.empty()) GTEST_SKIP() << "chromium is not installed (deploy/install_deps.sh installs Debian's chromium)";
-  const Result dom = Shell("timeout 120 " + chromium +
-                           " --headless --no-sandbox --disable-gpu --no-first-run --disable-background-networking"
-                           " --user-data-dir=" + (tmp.path / "profile").string() +
-                           " --virtual-time-budget=5000 --dump-dom file://" + (run / "report.html").string() +
-                           " 2>/dev/null");
-  ASSERT_EQ(dom.code, 0) << dom.output.substr(0, 2000);
-  // The page's script writes each image's decoded width and how many decoded.
-  std::smatch m;
-  ASSERT_TRUE(std::regex_search(dom.output, m, std::regex("data-images-loaded=\"(\\d+)\""))) << dom.output.substr(0, 2000);
-  EXPECT_EQ(m[1], "3");
-  std::vector<std::string> widths;
-  const std::regex w("alt=\"([^\"]*)\"[^>]*data-natural-width=\"(\\d+)\"");
-  for (auto it = std::sregex_iterator(dom.output.begin(), dom.output.end(), w); it != std::sregex_iterator(); ++it)
-    widths.push_back((*it)[1].str() + "=" + (*it)[2].str());
-  // The turntable stand-in is the depth command's preview (frame | map side by side: 192 px),
-  // the depth map itself 96 px, the edge preview 96 px.
-  EXPECT_EQ(widths, (std::vector<std::string>{"turntable render of mesh.ply=192", "depth 00030=96", "edges 00030=96"}));
+  const auto page = LoadInChromium(run / "report.html", tmp.path / "profile");
+  if (!page) GTEST_SKIP() << "chromium is not installed (deploy/install_deps.sh installs Debian's chromium)";
+  EXPECT_EQ(page->images_loaded, "3");
+  // The turntable stand-in and the depth figure are the depth command's preview (frame | map
+  // side by side: 192 px), the edge preview 96 px.
+  EXPECT_EQ(page->widths,
+            (std::vector<std::string>{"turntable render of mesh.ply=192", "depth 00030=192", "edges 00030=96"}));
+  // Without preview/, the depth figure is made from depth/00030.pfm (the map alone: 96 px).
+  fs::remove_all(run / "preview");
+  ASSERT_EQ(Cli("-q report --run " + run.string()).code, 0);
+  const auto from_pfm = LoadInChromium(run / "report.html", tmp.path / "profile");
+  ASSERT_TRUE(from_pfm);
+  EXPECT_EQ(from_pfm->images_loaded, "3");
+  EXPECT_EQ(from_pfm->widths,
+            (std::vector<std::string>{"turntable render of mesh.ply=192", "depth 00030=96", "edges 00030=96"}));
+}
+
+// `lfrecon run`'s own report.html: beside the turntable, the depth and edge
+// previews of --previews views evenly spread over those processed (views
+// 0, 3, ..., 87: the 0th, 10th and 20th of 30 at --previews 3), each loaded.
+TEST(ReportHtml, RunShowsDepthAndEdgePreviews) {
+  Dir tmp("run");
+  const fs::path data = tmp.path / "data", run = tmp.path / "run";
+  ASSERT_EQ(Cli("-q synth --scene sphere --frames 90 --width 96 --height 54 --out " + data.string()).code, 0);
+  const Result r = Cli("-q run --dataset " + data.string() + " --out " + run.string() +
+                       " --no-refine-poses --voxel-mm 4 --views 0:90:3 --previews 3");
+  ASSERT_EQ(r.code, 0) << r.output;
+  const std::vector<std::string> stems = {"00000", "00030", "00060"};
+  for (const char* dir : {"preview", "edges"}) {
+    std::vector<std::string> written;
+    for (const auto& e : fs::directory_iterator(run / dir)) written.push_back(e.path().stem().string());
+    std::sort(written.begin(), written.end());
+    EXPECT_EQ(written, stems) << dir;
+  }
+  const std::string html = ReadFile(run / "report.html");
+  EXPECT_EQ(CountMatches(html, "<img src=\"data:image/png;base64,"), 7);  // turntable, 3 depth, 3 edges
+  EXPECT_EQ(CountMatches(html, "alt=\"edges 000(00|30|60)\""), 3);
+  EXPECT_EQ(CountMatches(html, "alt=\"depth 000(00|30|60)\""), 3);
+  const auto page = LoadInChromium(run / "report.html", tmp.path / "profile");
+  if (!page) GTEST_SKIP() << "chromium is not installed (deploy/install_deps.sh installs Debian's chromium)";
+  EXPECT_EQ(page->images_loaded, "7");
+  std::vector<std::string> expected = {"turntable render of mesh.ply=" +
+                                       std::to_string(PngWidth(run / "mesh_turntable.png"))};
+  for (const std::string& s : stems) {
+    expected.push_back("depth " + s + "=192");  // frame | fused depth
+    expected.push_back("edges " + s + "=96");
+  }
+  EXPECT_EQ(page->widths, expected);
 }
 
 TEST(ReportHtml, MissingReportJsonNamesIt) {
