@@ -284,13 +284,25 @@ PipelineResult EmbeddedPipeline::Run(FrameSource& frames) {
         if (view_callback_) view_callback_(i, done, static_cast<int>(wanted.size()));
       });
   window.clear();
+  // The carving frames' object masks (CarvingOptions::carve_outside_masks).
+  const bool mask_carving = mask_of_view_ && options_.refine && options_.refine_options.carve &&
+                            options_.refine_options.carving.carve_outside_masks;
+  std::vector<cv::Mat> carve_masks;
   {
     std::map<int, cv::Mat> expanded;  // colour and carving frames share pixels
     for (auto& [f, pixels] : kept_frames) expanded[f] = ExpandFrame(pixels);
     kept_frames.clear();
     for (const auto& [f, image] : expanded) {
       if (color_ids.count(f)) color_views.push_back({views_[f], image, cv::Mat()});
-      if (carve_ids.count(f)) carve_views.push_back({views_[f], image, cv::Mat()});
+      if (!carve_ids.count(f)) continue;
+      carve_views.push_back({views_[f], image, cv::Mat()});
+      if (!mask_carving) continue;
+      cv::Mat mask = mask_of_view_(f);
+      if (!mask.empty() && mask.size() != image.size())
+        throw InputError("mask of view " + std::to_string(f), std::to_string(mask.cols) + "x" +
+                         std::to_string(mask.rows) + ", its frame " + std::to_string(image.cols) + "x" +
+                         std::to_string(image.rows));
+      carve_masks.push_back(std::move(mask));
     }
   }
   st.views = done;
@@ -324,8 +336,9 @@ PipelineResult EmbeddedPipeline::Run(FrameSource& frames) {
   st.carving_frames = static_cast<int>(carve_views.size());
   st.color_frames = static_cast<int>(color_views.size());
   // Refine, fall back to the fused surface, colour: as the service's refined export.
-  FinishedSurface finished = FinishSurface(fusion, result.mesh_raw, carve_views, color_views, options_);
+  FinishedSurface finished = FinishSurface(fusion, result.mesh_raw, carve_views, color_views, options_, carve_masks);
   carve_views.clear();
+  carve_masks.clear();
   color_views.clear();
   result.mesh = std::move(finished.mesh);
   st.refine = finished.refine;
@@ -411,6 +424,8 @@ PipelineResult EmbeddedPipeline::Run(FrameSource& frames) {
         {"occupied_voxels", st.refine.occupied_voxels},
         {"carving_region_voxels", st.refine.region_voxels},
         {"carved_voxels", st.refine.carved},
+        {"carved_outside_masks", st.refine.carved_outside_masks},
+        {"carving_mask_views", st.refine.mask_views},
         {"preview_views", preview_ids.size()},
         {"carved_per_round", st.refine.carved_per_round},
         {"poisson_points", st.refine.poisson_points},
@@ -440,6 +455,8 @@ PipelineResult EmbeddedPipeline::Run(FrameSource& frames) {
           {"dt_sigma_spatial", po.dt_sigma_spatial},
           {"dt_sigma_color", po.dt_sigma_color}}},
         {"carving", options_.refine && options_.refine_options.carve && st.carving_frames > 0},
+        {"carving_mask_margin_px",
+         mask_carving ? nlohmann::json(options_.refine_options.carving.mask_margin_px) : nlohmann::json()},
         {"poisson", options_.refine && options_.refine_options.use_poisson},
         {"consistency_threshold", options_.refine_options.carving.consistency_threshold},
         {"carving_rounds", options_.refine_options.carving.max_rounds}}},

@@ -77,7 +77,8 @@ class EmbeddedPipeline {
   void SetViewCallback(std::function<void(int, int, int)> cb) { view_callback_ = std::move(cb); }
   // Object masks (CV_8U of the view's size, nonzero = the object; an empty Mat:
   // none for that view), read when view i is fused, for
-  // PipelineOptions::mask_free_space. Not set: no masks.
+  // PipelineOptions::mask_free_space, and for the carving frames once fusion
+  // is done, for CarvingOptions::carve_outside_masks. Not set: no masks.
   void SetMasks(std::function<cv::Mat(int)> mask_of_view) { mask_of_view_ = std::move(mask_of_view); }
 
  private:

@@ -6,11 +6,11 @@ namespace lfrecon {
 
 FinishedSurface FinishSurface(const ProbabilisticFusion& fusion, const TriangleMesh& fused,
                               const std::vector<ColorView>& carve, const std::vector<ColorView>& color,
-                              const PipelineOptions& options) {
+                              const PipelineOptions& options, const std::vector<cv::Mat>& carve_masks) {
   FinishedSurface out;
   if (options.refine) {
     Timer tr;
-    RefineResult refined = RefineFusedSurface(fusion, carve, options.refine_options, options.meshing);
+    RefineResult refined = RefineFusedSurface(fusion, carve, options.refine_options, options.meshing, carve_masks);
     out.refine = refined.stats;
     out.seconds_refine = tr.Seconds();
     out.refined = !refined.mesh.triangles.empty();

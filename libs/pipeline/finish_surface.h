@@ -21,10 +21,12 @@ struct FinishedSurface {
 };
 
 // `fused`: the grid's iso-surface (ExtractMesh(options.meshing)); `carve`: the
-// carving frames (ReconstructionPlan::carving_frames), `color`: the colour frames.
+// carving frames (ReconstructionPlan::carving_frames), `color`: the colour frames;
+// `carve_masks`: empty, or the object mask of each carving frame (empty Mats
+// where a frame has none; CarvingOptions::carve_outside_masks).
 // Without options.refine the mesh is `fused`, coloured.
 FinishedSurface FinishSurface(const ProbabilisticFusion& fusion, const TriangleMesh& fused,
                               const std::vector<ColorView>& carve, const std::vector<ColorView>& color,
-                              const PipelineOptions& options);
+                              const PipelineOptions& options, const std::vector<cv::Mat>& carve_masks = {});
 
 }  // namespace lfrecon

@@ -19,7 +19,9 @@ struct RefineStats {
   std::size_t region_voxels = 0;    // |R|
   int carving_views = 0;
   std::vector<std::size_t> carved_per_round;
-  std::size_t carved = 0;
+  int mask_views = 0;                    // carving views with a usable object mask
+  std::size_t carved_outside_masks = 0;  // before the rounds (CarvingOptions::carve_outside_masks)
+  std::size_t carved = 0;                // in all: outside the masks and in every round
   std::size_t poisson_points = 0;
   int poisson_depth = 0;
   std::size_t mesh_vertices = 0, mesh_triangles = 0;
@@ -35,9 +37,11 @@ struct RefineResult {
 // `views`: colour frames with their geometry (e.g. the frames the pipeline
 // keeps for colouring; at most options.max_views of them, evenly spread, are
 // used); their depth fields are ignored. `meshing`: the threshold and
-// min_views the fused mesh was extracted with. Throws OptionError /
+// min_views the fused mesh was extracted with. `masks`: empty, or the object
+// mask of each view (VoxelCarving). Throws OptionError /
 // std::invalid_argument.
 RefineResult RefineFusedSurface(const ProbabilisticFusion& fusion, const std::vector<ColorView>& views,
-                                const RefineOptions& options, const MeshingOptions& meshing = {});
+                                const RefineOptions& options, const MeshingOptions& meshing = {},
+                                const std::vector<cv::Mat>& masks = {});
 
 }  // namespace lfrecon

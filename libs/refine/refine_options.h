@@ -40,6 +40,24 @@ struct CarvingOptions {
   // carving through it would open the surface into the unobserved inside,
   // whose wall is not meshed, and hand Poisson points of that wall.
   bool keep_inner_wall = true;
+  // Object masks (ours), when the views come with them (VoxelCarving's
+  // `masks`): before the photo-consistency rounds, every occupied voxel that a
+  // view with a mask has in its image (in front of it) farther than
+  // mask_margin_px plus the voxel's own projected half-diagonal from every
+  // object pixel of that mask is carved: no part of it is on the object, so it
+  // is halo or background (a visual hull, one view suffices). Visibility does
+  // not enter: a silhouette bounds the object whatever hides what. Every
+  // occupied voxel is judged, not only R's exposed ones, so a halo thicker than
+  // R goes at once; a voxel next to the unobserved inside may go too (that
+  // inside is outside the mask as well). mask_margin_px is the fusion's
+  // (PipelineOptions::mask_free_space): a mask drawn a pixel or two tight keeps
+  // the object's rim. Masks with no object pixel are ignored.
+  // Off by default: on generated tabletops with masks (docs/benchmarks.md,
+  // "Masks in carving") it cost 0.02 thin recall and gained no F-score; likely
+  // because a mask that labels pixel centres misses a rod thinner than a pixel
+  // wherever it falls between them, and one such view carves the rod there.
+  bool carve_outside_masks = false;
+  double mask_margin_px = 2.0;
   // Only the exposed voxels of R (with a free 6-neighbour) are judged in a
   // round, so each round peels at most one layer and carving can never hollow
   // out R from inside: a voxel behind the surface would see different surface

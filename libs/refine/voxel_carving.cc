@@ -4,6 +4,8 @@
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 
+#include <opencv2/imgproc.hpp>
+
 #include <algorithm>
 #include <cmath>
 #include <deque>
@@ -87,10 +89,11 @@ void CarvingOptions::Check() const {
   LFRECON_CHECK_OPTION(consistency_threshold > 0 && consistency_threshold <= 1);
   LFRECON_CHECK_OPTION(min_views >= 1);
   LFRECON_CHECK_OPTION(std::isfinite(visibility_tolerance) && visibility_tolerance >= 0);
+  LFRECON_CHECK_OPTION(std::isfinite(mask_margin_px) && mask_margin_px >= 0);
 }
 
 std::size_t CarvingResult::TotalCarved() const {
-  std::size_t n = 0;
+  std::size_t n = carved_outside_masks;
   for (const CarvingRound& r : rounds) n += r.carved;
   return n;
 }
@@ -167,8 +170,60 @@ double PhotoConsistencyVariance(const Eigen::Vector3d& center, const Eigen::Vect
   return std::max(0.0, m2 / wsum);  // eq. 16
 }
 
-CarvingResult VoxelCarving(VoxelGrid* grid, const std::vector<ColorView>& color_views, const CarvingOptions& options) {
+std::vector<Eigen::Vector3i> VoxelsOutsideMasks(const VoxelGrid& grid, const std::vector<PinholeView>& views,
+                                                const std::vector<cv::Mat>& masks, double margin_px,
+                                                std::size_t* mask_views) {
+  if (!masks.empty() && masks.size() != views.size())
+    throw std::invalid_argument("VoxelsOutsideMasks: " + std::to_string(masks.size()) + " masks for " +
+                                std::to_string(views.size()) + " views");
+  // Per view with a mask: each pixel's distance to the nearest object pixel.
+  std::vector<std::size_t> used;
+  std::vector<cv::Mat> distance(views.size());
+  for (std::size_t i = 0; i < masks.size(); ++i) {
+    const cv::Mat& m = masks[i];
+    if (m.empty()) continue;
+    if (m.type() != CV_8U || m.rows != views[i].height || m.cols != views[i].width)
+      throw std::invalid_argument("VoxelsOutsideMasks: each mask must be CV_8U of its view's size");
+    if (cv::countNonZero(m) == 0) continue;  // no object in it: more likely a wrong mask than an empty view
+    cv::distanceTransform(m == 0, distance[i], cv::DIST_L2, cv::DIST_MASK_PRECISE);
+    used.push_back(i);
+  }
+  if (mask_views) *mask_views = used.size();
+  if (used.empty()) return {};
+  const std::vector<Eigen::Vector3i> occupied = grid.OccupiedVoxels();
+  const double half_diagonal = 0.5 * std::sqrt(3.0) * grid.voxel_size();
+  std::vector<char> outside(occupied.size(), 0);
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, occupied.size()), [&](const auto& range) {
+    for (std::size_t k = range.begin(); k < range.end(); ++k) {
+      const Eigen::Vector3d x = grid.Center(occupied[k]);
+      for (std::size_t i : used) {
+        const PinholeView& view = views[i];
+        Eigen::Vector2d px;
+        const double z = view.Project(x, &px);
+        if (z <= 0 || !view.InImage(px)) continue;
+        // The voxel's projected half-diagonal (a sphere around the cube, at
+        // the centre's depth): the cube lies within it.
+        const double radius_px = half_diagonal * std::max(view.K(0, 0), view.K(1, 1)) / z;
+        const float d = distance[i].at<float>(static_cast<int>(px.y()), static_cast<int>(px.x()));
+        if (d > margin_px + radius_px) {
+          outside[k] = 1;
+          break;
+        }
+      }
+    }
+  });
+  std::vector<Eigen::Vector3i> out;
+  for (std::size_t k = 0; k < occupied.size(); ++k)
+    if (outside[k]) out.push_back(occupied[k]);
+  return out;
+}
+
+CarvingResult VoxelCarving(VoxelGrid* grid, const std::vector<ColorView>& color_views, const CarvingOptions& options,
+                           const std::vector<cv::Mat>& masks) {
   options.Check();
+  if (!masks.empty() && masks.size() != color_views.size())
+    throw std::invalid_argument("VoxelCarving: " + std::to_string(masks.size()) + " masks for " +
+                                std::to_string(color_views.size()) + " views");
   std::vector<PinholeView> views;
   std::vector<cv::Mat> images;
   for (const ColorView& cv : color_views) {
@@ -185,6 +240,15 @@ CarvingResult VoxelCarving(VoxelGrid* grid, const std::vector<ColorView>& color_
   }
   CarvingResult result;
   result.occupied_before = grid->CountOccupied();
+  if (options.carve_outside_masks && !masks.empty()) {
+    Timer timer;
+    const std::vector<Eigen::Vector3i> outside =
+        VoxelsOutsideMasks(*grid, views, masks, options.mask_margin_px, &result.mask_views);
+    for (const Eigen::Vector3i& v : outside) grid->Carve(v);
+    result.carved_outside_masks = outside.size();
+    spdlog::info("carving: {} of {} occupied voxels outside the object masks of {} views carved ({:.1f} s)",
+                 outside.size(), result.occupied_before, result.mask_views, timer.Seconds());
+  }
 
   // R: occupied voxels within region_depth voxels (6-connected steps through
   // occupied voxels) of the outer surface; depth 1 = the exposed voxels.

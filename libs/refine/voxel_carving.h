@@ -23,8 +23,10 @@ struct CarvingRound {
 struct CarvingResult {
   std::size_t region_voxels = 0;  // |R|
   std::size_t occupied_before = 0, occupied_after = 0;
+  std::size_t mask_views = 0;          // views with a usable mask
+  std::size_t carved_outside_masks = 0;  // before the rounds (CarvingOptions::carve_outside_masks)
   std::vector<CarvingRound> rounds;  // one per round run
-  std::size_t TotalCarved() const;
+  std::size_t TotalCarved() const;   // outside the masks and in every round
 };
 
 // Carves `grid` in place, at most options.max_rounds rounds. Each round
@@ -32,9 +34,22 @@ struct CarvingResult {
 // view for visibility, propagates the mesh normals into R, and carves every
 // exposed voxel of R whose weighted colour variance over the views that see
 // it (eq. 15-16) is too high. `views`: frames (CV_32FC3 BGR in [0, 1] or
-// CV_8UC3) with their geometry; their depth fields are ignored. Throws
-// OptionError / std::invalid_argument.
-CarvingResult VoxelCarving(VoxelGrid* grid, const std::vector<ColorView>& views, const CarvingOptions& options);
+// CV_8UC3) with their geometry; their depth fields are ignored. `masks`:
+// empty, or one per view (CV_8U of its size, nonzero = the object; an empty
+// Mat: none for that view): the voxels outside them are carved first
+// (CarvingOptions::carve_outside_masks). Throws OptionError /
+// std::invalid_argument.
+CarvingResult VoxelCarving(VoxelGrid* grid, const std::vector<ColorView>& views, const CarvingOptions& options,
+                           const std::vector<cv::Mat>& masks = {});
+
+// The voxels CarvingOptions::carve_outside_masks carves: every occupied voxel
+// of `grid` that some view of `views` with a mask (`masks[i]` nonempty, with
+// an object pixel) has in its image, in front of it, farther than
+// `margin_px` + the voxel's projected half-diagonal from every object pixel
+// (deterministic order). The grid is not changed.
+std::vector<Eigen::Vector3i> VoxelsOutsideMasks(const VoxelGrid& grid, const std::vector<PinholeView>& views,
+                                                const std::vector<cv::Mat>& masks, double margin_px,
+                                                std::size_t* mask_views = nullptr);
 
 // Photo-consistency of one voxel (eq. 15-16): the weighted colour variance
 // PC(v) = Σ w_v(i) ||c_v(i) - μ_v||² / Σ w_v(i) with w_v(i) = n_v · r_{v,i}

@@ -38,6 +38,7 @@ struct RunArgs {
   double sigma_s = 0;
   bool no_refine_poses = false;
   bool no_mask_free_space = false;
+  bool mask_carving = false;
   RunOutputFlags outputs;  // mesh formats, point cloud, COLMAP workspace, report.html
   bool all_views = false;
 };
@@ -112,10 +113,17 @@ int RunPipeline(const RunArgs& args) {
     if (!args.out.empty()) WriteRefinedModel(ds, views, args.out / "sparse_refined");
   }
   if (args.no_mask_free_space) options.mask_free_space.confidence = 0;
+  if (args.mask_carving) options.refine_options.carving.carve_outside_masks = true;
   options.preview_views = args.outputs.previews;
   EmbeddedPipeline pipeline(views, ds.bbox(), options, names);
-  if (ds.HasMasks() && options.mask_free_space.confidence > 0) {
-    spdlog::info("run: masks from {}: free space outside them in fusion", ds.mask_source());
+  const bool mask_free_space = options.mask_free_space.confidence > 0;
+  const bool mask_carving = options.refine && options.refine_options.carve &&
+                            options.refine_options.carving.carve_outside_masks;
+  if (ds.HasMasks() && (mask_free_space || mask_carving)) {
+    spdlog::info("run: masks from {}: {}", ds.mask_source(),
+                 mask_free_space && mask_carving ? "free space outside them in fusion, carved outside them after"
+                 : mask_free_space             ? "free space outside them in fusion"
+                                               : "carved outside them after fusion");
     pipeline.SetMasks([&ds](int i) { return ds.ReadMask(i); });
   }
   auto frames = ds.OpenFrames();
@@ -167,6 +175,10 @@ void AddRunCommand(CLI::App& root, int* exit_code) {
   cmd->add_flag("--no-mask-free-space", args->no_mask_free_space,
                 "With masks (masks/, an alpha channel, mask_path): use them for V only. By default the fusion "
                 "also takes every pixel more than 2 px outside its mask as empty space through V");
+  cmd->add_flag("--mask-carving", args->mask_carving,
+                "With masks: also carve the fused voxels that lie outside a carving frame's mask (more than 2 px "
+                "and the voxel's own size from its object) before the photo-consistency carving. Off by default: "
+                "masks that miss thin parts lose them (docs/benchmarks.md)");
   cmd->add_option("--color-views", args->color_views, "Frames kept to colour the mesh (0: none)")->capture_default_str();
   cmd->callback([args, exit_code] { *exit_code = RunPipeline(*args); });
 }

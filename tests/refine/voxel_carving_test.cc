@@ -1,10 +1,13 @@
 // Voxel carving (eqs. 15-16) on a fused textured sphere: the grid's mesh is
 // the fusion's mesh; a spurious blob stuck onto the surface is carved while
-// the true surface stays; eq. 16 on hand-made views; the whole refinement
-// (carving + Poisson) stays as accurate as the fused mesh.
+// the true surface stays; eq. 16 on hand-made views; voxels outside object
+// masks; the whole refinement (carving + Poisson) stays as accurate as the
+// fused mesh.
 #include "refine/voxel_carving.h"
 
 #include <gtest/gtest.h>
+
+#include <opencv2/imgproc.hpp>
 
 #include <cmath>
 #include <set>
@@ -230,6 +233,108 @@ TEST(VoxelCarving, PhotoConsistencyIsTheWeightedColourVariance) {
   EXPECT_EQ(used, 2);
   EXPECT_LT(PhotoConsistencyVariance(Eigen::Vector3d::Zero(), n, views, images, back2, 0.001, 3), 0.0)
       << "fewer views than min_views: no verdict";
+}
+
+// A 3x3x3 cube of occupied voxels (1 cm) at the origin in free space, with
+// one occupied voxel half a voxel off its +x face (the cube's own surface, as
+// fusion leaves it) and one 3.5 voxels off it (a halo). Three views 0.5 m
+// away look at it from +z, +y and +x (64 px, 40 deg: a voxel is 1.76 px
+// there), each with the cube's exact silhouette as its mask.
+struct MaskedCube {
+  static constexpr double kVoxel = 0.01;
+  VoxelGrid grid{Box(Eigen::Vector3d::Constant(-0.105), Eigen::Vector3d::Constant(0.105)), kVoxel, 0.2};
+  const Eigen::Vector3i centre{10, 10, 10};  // voxel centre at the origin
+  const Eigen::Vector3i adjacent = centre + Eigen::Vector3i(2, 0, 0);
+  const Eigen::Vector3i halo = centre + Eigen::Vector3i(5, 0, 0);
+  std::vector<ColorView> views;
+  std::vector<cv::Mat> masks;
+
+  MaskedCube() {
+    for (int dx = -6; dx <= 6; ++dx)
+      for (int dy = -6; dy <= 6; ++dy)
+        for (int dz = -6; dz <= 6; ++dz) {
+          const Eigen::Vector3i d(dx, dy, dz);
+          const bool cube = d.cwiseAbs().maxCoeff() <= 1;
+          grid.Set(centre + d, cube ? VoxelState::kOccupied : VoxelState::kFree, cube ? 1.0f : 0.0f);
+        }
+    grid.Set(adjacent, VoxelState::kOccupied, 1.0f);
+    grid.Set(halo, VoxelState::kOccupied, 1.0f);
+    for (const Eigen::Vector3d& eye : {Eigen::Vector3d(0, 0, 0.5), Eigen::Vector3d(0, 0.5, 0), Eigen::Vector3d(0.5, 0, 0)}) {
+      const PinholeView view = testing::LookAtView(eye, Eigen::Vector3d::Zero(), 64, 64, 40);
+      // The cube's silhouette: the convex hull of its 8 projected corners.
+      std::vector<cv::Point> corners;
+      for (int k = 0; k < 8; ++k) {
+        const Eigen::Vector3d c = 1.5 * kVoxel * Eigen::Vector3d(k & 1 ? 1 : -1, k & 2 ? 1 : -1, k & 4 ? 1 : -1);
+        Eigen::Vector2d px;
+        view.Project(c, &px);
+        corners.emplace_back(static_cast<int>(std::lround(px.x() - 0.5)), static_cast<int>(std::lround(px.y() - 0.5)));
+      }
+      std::vector<cv::Point> hull;
+      cv::convexHull(corners, hull);
+      cv::Mat mask(64, 64, CV_8U, cv::Scalar(0));
+      cv::fillConvexPoly(mask, hull, cv::Scalar(255));
+      views.push_back({view, cv::Mat(64, 64, CV_8UC3, cv::Scalar(0, 0, 0)), cv::Mat()});
+      masks.push_back(mask);
+    }
+  }
+};
+
+TEST(VoxelCarving, VoxelsOutsideAnObjectMaskAreCarved) {
+  MaskedCube c;
+  const std::size_t occupied = c.grid.CountOccupied();
+  ASSERT_EQ(occupied, 29u);
+  CarvingOptions o;
+  o.carve_outside_masks = true;
+  o.max_rounds = 0;  // the masks only, no photo-consistency
+  const CarvingResult r = VoxelCarving(&c.grid, c.views, o, c.masks);
+  // The halo projects 6 px off the silhouette in the +z and +y views (onto the
+  // cube in the +x view): farther than 2 px + the voxel's 1.5 px half-diagonal.
+  EXPECT_EQ(r.mask_views, 3u);
+  EXPECT_EQ(r.carved_outside_masks, 1u);
+  EXPECT_EQ(r.TotalCarved(), 1u);
+  EXPECT_EQ(c.grid.State(c.halo), VoxelState::kFree);
+  EXPECT_EQ(c.grid.Value(c.halo), 0.0f);
+  // The cube, inside every mask, and the voxel half a voxel off it (within the margin) stay.
+  EXPECT_EQ(c.grid.State(c.adjacent), VoxelState::kOccupied);
+  EXPECT_EQ(c.grid.CountOccupied(), occupied - 1);
+  EXPECT_EQ(r.occupied_after, occupied - 1);
+}
+
+TEST(VoxelCarving, MasksThatDoNotExcludeAVoxelKeepIt) {
+  CarvingOptions o;
+  o.carve_outside_masks = true;
+  o.max_rounds = 0;
+  {  // Only the +x view has a mask: the halo projects onto the cube there.
+    MaskedCube c;
+    c.masks[0] = cv::Mat();
+    c.masks[1] = cv::Mat(64, 64, CV_8U, cv::Scalar(0));  // no object: ignored
+    const CarvingResult r = VoxelCarving(&c.grid, c.views, o, c.masks);
+    EXPECT_EQ(r.mask_views, 1u);
+    EXPECT_EQ(r.carved_outside_masks, 0u);
+    EXPECT_EQ(c.grid.State(c.halo), VoxelState::kOccupied);
+  }
+  {  // Masks given but not used (the default).
+    MaskedCube c;
+    CarvingOptions defaults;
+    defaults.max_rounds = 0;
+    EXPECT_FALSE(defaults.carve_outside_masks);
+    EXPECT_EQ(VoxelCarving(&c.grid, c.views, defaults, c.masks).TotalCarved(), 0u);
+    EXPECT_EQ(c.grid.CountOccupied(), 29u);
+  }
+  {  // A wider margin (7 px) keeps the halo too.
+    MaskedCube c;
+    o.mask_margin_px = 7;
+    EXPECT_EQ(VoxelCarving(&c.grid, c.views, o, c.masks).carved_outside_masks, 0u);
+    o.mask_margin_px = 2;
+  }
+  {  // One mask per view, of its size.
+    MaskedCube c;
+    EXPECT_THROW(VoxelCarving(&c.grid, c.views, o, {c.masks[0]}), std::invalid_argument);
+    c.masks[2] = cv::Mat(32, 32, CV_8U, cv::Scalar(255));
+    EXPECT_THROW(VoxelCarving(&c.grid, c.views, o, c.masks), std::invalid_argument);
+    o.mask_margin_px = -1;
+    EXPECT_THROW(VoxelCarving(&c.grid, c.views, o, {}), OptionError);
+  }
 }
 
 TEST(Refine, FusedTexturedSphereStaysAccurate) {
