@@ -25,7 +25,7 @@ Aggregator::Aggregator(const AggregatorOptions& options) : options_(options), st
   // Resume every job the store holds that has not ended.
   for (const auto& e : fs::directory_iterator(store_.root())) {
     const std::string id = e.path().filename().string();
-    if (!store_.Exists(id) || store_.ReadText(id, "status.pb")) continue;
+    if ((!store_.Exists(id) && !GrowingStream(store_, id)) || store_.ReadText(id, "status.pb")) continue;
     jobs_[id] = LoadOrFail(id);
   }
 }
@@ -38,10 +38,12 @@ Aggregator::~Aggregator() {
 Aggregator::Job* Aggregator::FindJob(const std::string& id) {
   const auto it = jobs_.find(id);
   if (it != jobs_.end()) {
+    GrowStream(*it->second);
     Reap(*it->second);
     return it->second.get();
   }
-  if (!store_.Exists(id)) return nullptr;
+  // A job: its manifest, or an open stream that gives V (its plan grows with its frames, stream_plan.cc).
+  if (!store_.Exists(id) && !GrowingStream(store_, id)) return nullptr;
   auto job = LoadOrFail(id);
   Job* p = job.get();
   jobs_[id] = std::move(job);
@@ -68,7 +70,8 @@ pb::Envelope Aggregator::Handle(const pb::Envelope& req, Deferred* deferred, con
       return ErrorEnvelope(pb::ERROR_UNKNOWN_JOB, "invalid job id '" + req.job_id() + "'", req.job_id());
     Job* job = FindJob(req.job_id());
     if (!job && req.has_status() && fs::exists(store_.JobDir(req.job_id()) / "stream.pb")) {
-      // A client-pushed stream still open at ingest (its manifest comes at its end), or one that failed there.
+      // A client-pushed stream without V still open at ingest (its manifest comes at its end),
+      // or one that failed there.
       pb::Envelope out = NewEnvelope(req.job_id());
       pb::JobStatus* s = out.mutable_job_status();
       if (auto st = store_.ReadText(req.job_id(), "status.pb")) {
@@ -81,7 +84,7 @@ pb::Envelope Aggregator::Handle(const pb::Envelope& req, Deferred* deferred, con
       for (const auto& e : fs::directory_iterator(store_.JobDir(req.job_id()) / "frames", ec))
         frames += e.path().extension() == ".pb";
       s->set_frames_spooled(frames);
-      s->set_message("stream open: the plan is computed when it ends");
+      s->set_message("stream open without V: the plan is computed when it ends (V is estimated from every camera)");
       return out;
     }
     if (!job) return ErrorEnvelope(pb::ERROR_UNKNOWN_JOB, "unknown job '" + req.job_id() + "'", req.job_id());
@@ -175,7 +178,10 @@ void Aggregator::Serve() {
       if (!q.running.valid() && !q.pending.empty()) q.running = std::async(std::launch::async, q.pending.front().work);
       busy = busy || !q.pending.empty();
     }
-    for (auto& [id, job] : jobs_) Reap(*job);  // fusion finished (outputs written) or failed
+    for (auto& [id, job] : jobs_) {
+      GrowStream(*job);  // an open stream's new frames, its end or failure
+      Reap(*job);        // fusion finished (outputs written) or failed
+    }
     auto in = server.Receive(std::chrono::milliseconds(busy ? 20 : 200));
     if (!in) continue;
     pb::Envelope reply;

@@ -33,9 +33,14 @@
 //  * What is computed, from which frames and maps, and when a job is done
 //    follow the job's ReconstructionPlan (JobGeometry::plan), the plan
 //    `lfrecon run` computes for the same cameras and options.
+//  * A client-pushed stream that gives V is a job from its opening: its plan
+//    is computed again on the frames stored so far, and the views it settles
+//    (their entries no later frame changes) are leased and fused while the
+//    stream is open, the rest after its end (stream_plan.cc).
 // No algorithm here: the stages are the libraries' calls. One job per file:
 // aggregator.cc (dispatch), leases.cc (view tasks), job_fusion.cc (a job's
-// fusion and checkpoint), export.cc (exports); aggregator_job.h (a job's state).
+// fusion and checkpoint), export.cc (exports), stream_plan.cc (an open
+// stream's growing plan); aggregator_job.h (a job's state).
 #include <chrono>
 #include <functional>
 #include <map>
@@ -118,6 +123,9 @@ class Aggregator {
   static void StopFusion(Job& job, bool join);
   // Serving thread: a job whose fusion thread finished (outputs written) or failed ends here.
   void Reap(Job& job);
+  // Serving thread, an open stream's job (stream_plan.cc): the frames stored
+  // since, its end (the manifest's plan replaces the prefix's) or its failure at ingest.
+  void GrowStream(Job& job);
   void EndJob(Job& job, pb::JobState state, const std::string& message);
   pb::JobStatus Status(const Job& job) const;
   void ExpireLeases(Job& job);

@@ -5,6 +5,7 @@
 //   leases.cc      view tasks: what is ready (the job plan's), leases, results, failures
 //   job_fusion.cc  a job's fusion and checkpoint: loading (and replaying) it, the fusion thread, its end
 //   export.cc      meshes on request: plain (of the live grid) and refined (from the checkpoint)
+//   stream_plan.cc an open stream's growing plan: its new frames, its end, its failure at ingest
 #include <atomic>
 #include <condition_variable>
 #include <deque>
@@ -29,9 +30,15 @@ struct Aggregator::Job {
   pb::JobStatus final_status;  // for jobs that ended (loaded from status.pb)
   // Running jobs only. The serving thread's:
   bool active = false;  // running: the fusion thread is up, results are taken
-  JobGeometry geo;      // constant once loaded (the fusion thread reads it too)
-  int n = 0;         // frames (views) of the job
-  int num_fused = 0;  // views to fuse: the plan's selected views (geo.plan.views)
+  // Constant once loaded; for an open stream (geo.open) replaced as its frames
+  // arrive (SetGeometry, stream_plan.cc). Other threads read shared_geo.
+  JobGeometry geo;
+  int n = 0;         // frames (views) of the job: of an open stream, those received so far
+  int num_fused = 0;  // views to fuse: the plan's selected views (geo.plan.views); of an open stream, so far
+  // Views whose depth (settled_depth) and propagate (settled) tasks may be leased:
+  // every view once all cameras are known; of an open stream, those whose plan
+  // entries are the whole stream's (ReconstructionPlan::SettledDepthFrames, SettledFrames).
+  int settled = 0, settled_depth = 0;
   std::vector<char> frame_ok, sparse_ok, dense_ok;
   int frames_spooled = 0, sparse_done = 0, dense_done = 0;  // dense_done: maps received (stored)
   bool ingest_done = false;
@@ -49,7 +56,9 @@ struct Aggregator::Job {
   std::map<std::pair<int, int>, Tries> tries;
   int tasks_failed = 0;
   Clock::time_point last_ingest = Clock::now();  // JobCreated, FrameSpooled, IngestDone (or the load)
-  // Shared with the job's fusion thread:
+  // Shared with the job's fusion thread and the exports:
+  std::mutex geo_mu;                              // guards shared_geo
+  std::shared_ptr<const JobGeometry> shared_geo;  // geo as the other threads take it (Geometry())
   std::mutex grid_mu;  // held while a view is integrated and while an export extracts its mesh
   std::unique_ptr<ProbabilisticFusion> fusion;  // guarded by grid_mu; released when the thread stops
   std::mutex queue_mu;                          // guards queue, fused (and stop's changes, for the wait)
@@ -69,6 +78,36 @@ struct Aggregator::Job {
   std::thread thread;
 
   ~Job() { StopFusion(*this, true); }
+  // Serving thread: the job's geometry (loaded, or an open stream's grown or
+  // ended): what is leased and fused follows its plan from now on.
+  void SetGeometry(JobGeometry g) {
+    geo = std::move(g);
+    n = static_cast<int>(geo.views.size());
+    num_fused = static_cast<int>(geo.plan.views.size());
+    settled = ReconstructionPlan::SettledFrames(n, !geo.open, geo.options);
+    settled_depth = ReconstructionPlan::SettledDepthFrames(n, !geo.open, geo.options);
+    const auto size = static_cast<std::size_t>(n);
+    frame_ok.resize(size, 0), sparse_ok.resize(size, 0), dense_ok.resize(size, 0);
+    {
+      std::lock_guard<std::mutex> lk(geo_mu);
+      shared_geo = std::make_shared<const JobGeometry>(geo);
+    }
+    {
+      std::lock_guard<std::mutex> lk(queue_mu);
+      fused.resize(size, 0);
+    }
+    queue_cv.notify_all();  // an ended stream may have every view fused already
+  }
+  // Any thread: the geometry as it is now (a view queued for fusion is in it).
+  std::shared_ptr<const JobGeometry> Geometry() {
+    std::lock_guard<std::mutex> lk(geo_mu);
+    return shared_geo;
+  }
+  // Every view of the plan is fused, and the plan is final (the stream, if any, has ended).
+  bool AllFused() {
+    const std::shared_ptr<const JobGeometry> g = Geometry();
+    return g && !g->open && views_fused >= static_cast<int>(g->plan.views.size());
+  }
   bool Ended() const {
     return state == pb::STATE_DONE || state == pb::STATE_FAILED || state == pb::STATE_CANCELLED;
   }

@@ -159,7 +159,10 @@ Aggregator::Work Aggregator::RefinedExport(const Job& job) const {
 // views only), coloured after it. A finished job's is mesh.ply.
 Aggregator::Work Aggregator::PlainExport(Job& job) const {
   const bool done = job.state == pb::STATE_DONE;
-  return [store = store_, job = &job, done, views_fused = job.final_status.views_fused(),
+  // The geometry of now: an open stream's colour frames are its prefix's, as its frame_ok.
+  std::shared_ptr<const JobGeometry> geo = job.Geometry();
+  if (!geo) geo = std::make_shared<const JobGeometry>();  // a job loaded after its end (its mesh.ply is served)
+  return [store = store_, job = &job, done, views_fused = job.final_status.views_fused(), geo,
           frame_ok = done ? std::vector<char>() : job.frame_ok]() mutable -> pb::Envelope {
     const std::string& id = job->id;
     try {
@@ -179,7 +182,7 @@ Aggregator::Work Aggregator::PlainExport(Job& job) const {
                                  "job " + id + " is " + pb::JobState_Name(s.state()) + ": nothing to export", id);
           complete = true, views_fused = s.views_fused();
         } else {
-          mesh = job->fusion->ExtractMesh(job->geo.options.meshing);
+          mesh = job->fusion->ExtractMesh(geo->options.meshing);
           views_fused = job->views_fused;
           complete = job->outcome == Job::kFinished;
         }
@@ -188,7 +191,7 @@ Aggregator::Work Aggregator::PlainExport(Job& job) const {
         mesh = ReadPly(dir / "mesh.ply");
         rep->set_ply(ReadFileBytes(dir / "mesh.ply"));
       } else {
-        ColourMesh(store, job->geo, frame_ok, &mesh);
+        ColourMesh(store, *geo, frame_ok, &mesh);
         const fs::path tmp = dir / ("export_" + std::to_string(::getpid()) + "_" +
                                     std::to_string(std::hash<std::thread::id>()(std::this_thread::get_id())) + ".ply");
         WritePly(mesh, tmp);

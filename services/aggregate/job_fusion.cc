@@ -41,13 +41,9 @@ std::unique_ptr<Aggregator::Job> Aggregator::LoadJob(const std::string& id) {
     job->message = job->final_status.message();
     return job;
   }
-  job->geo = LoadJobGeometry(store_, id);
-  const int n = job->n = static_cast<int>(job->geo.views.size());
-  job->num_fused = static_cast<int>(job->geo.plan.views.size());
-  job->frame_ok.assign(n, 0);
-  job->sparse_ok.assign(n, 0);
-  job->dense_ok.assign(n, 0);
-  job->fused.assign(n, 0);
+  // An open stream that gives V: its frames so far, and the plan grows with them (stream_plan.cc).
+  job->SetGeometry(LoadJobGeometry(store_, id));
+  const int n = job->n;
   // What a crash (or a power loss before the store synced its files) left: a
   // stored file too short to hold its view is removed and that view done again.
   const fs::path dir = store_.JobDir(id);
@@ -78,7 +74,7 @@ std::unique_ptr<Aggregator::Job> Aggregator::LoadJob(const std::string& id) {
       job->sparse_ok[k] = 1, ++job->sparse_done;
     if (store_.HasMap(id, pb::MAP_DENSE, k)) intact(store_.MapPath(id, pb::MAP_DENSE, k), pixels * 4);
   }
-  job->ingest_done = store_.ReadText(id, "ingest.done").has_value();
+  job->ingest_done = !job->geo.open && store_.ReadText(id, "ingest.done").has_value();
   if (job->ingest_done) job->state = pb::STATE_RUNNING;
   job->fusion = NewFusion(job->geo);
   job->active = true;
@@ -135,68 +131,81 @@ void Aggregator::StopFusion(Job& job, bool join) {
 void Aggregator::FusionLoop(Job* jp) const {
   Job& job = *jp;
   const std::string& id = job.id;
-  const PipelineOptions& po = job.geo.options;
+  // The geometry as this thread last took it: an open stream's grows (a view
+  // queued for fusion is in every one taken after); the options are the same in all.
+  std::shared_ptr<const JobGeometry> geo = job.Geometry();
+  const PipelineOptions po = geo->options;
   Timer replay_timer;
   int done = 0;
   try {
     for (;;) {
-      std::pair<int, bool> item;
+      std::pair<int, bool> item{-1, false};
       {
         std::unique_lock<std::mutex> lk(job.queue_mu);
-        // A signal cannot notify: look at StopRequested() now and then.
-        while (!job.stop && !StopRequested() && (job.queue.empty() || job.outcome != Job::kFusing))
+        // A signal cannot notify: look at StopRequested() now and then. With
+        // nothing queued, an ended stream's last views may all be fused already.
+        while (!job.stop && !StopRequested() &&
+               (job.outcome != Job::kFusing || (job.queue.empty() && !job.AllFused())))
           job.queue_cv.wait_for(lk, std::chrono::milliseconds(200));
         if (job.stop || StopRequested()) break;
-        item = job.queue.front();
-        job.queue.pop_front();
-        if (job.fused[item.first]) continue;
+        if (!job.queue.empty()) {
+          item = job.queue.front();
+          job.queue.pop_front();
+          if (job.fused[item.first]) continue;
+        }
       }
-      const int v = item.first;
-      DepthMap map;
-      try {
-        map = store_.ReadMap(id, pb::MAP_DENSE, v, job.geo.views[v]);
-      } catch (const InputError& e) {  // a map the store lost (a crash): the view is done again
-        spdlog::warn("aggregate: job {}: stored dense map of view {} unreadable ({}): removed, re-issued", id, v,
-                     e.what());
-        std::error_code ec;
-        fs::remove(store_.MapPath(id, pb::MAP_DENSE, v), ec);
-        std::lock_guard<std::mutex> lk(job.queue_mu);
-        job.unreadable.push_back(v);
-        continue;
-      }
-      if (NeedsBackgroundFloor(job.geo.options)) {  // as lfrecon run: the same function on the same maps
-        DepthMap sparse;
+      geo = job.Geometry();
+      if (item.first >= 0) {  // a stored dense map: into the grid
+        const int v = item.first;
+        DepthMap map;
         try {
-          sparse = store_.ReadMap(id, pb::MAP_SPARSE, v, job.geo.views[v]);
-        } catch (const InputError& e) {  // the floor is then gated by the dense map alone
-          spdlog::warn("aggregate: job {}: sparse map of view {} unreadable ({}): background floor gated without it",
-                       id, v, e.what());
-        }
-        map = WithBackgroundFloor(map, sparse, job.geo.views[v], job.geo.volume, job.geo.options);
-      }
-      {
-        std::lock_guard<std::mutex> grid(job.grid_mu);
-        job.fusion->Integrate(job.geo.views[v], map, v);
-        for (int slept = 0; slept < options_.fusion_delay_ms && !job.stop && !StopRequested(); slept += 10)
-          std::this_thread::sleep_for(std::chrono::milliseconds(10));  // fault injection (tests)
-        job.active_voxels = job.fusion->Stats().active_voxels;
-        if (item.second) store_.AppendLine(id, "fused.log", std::to_string(v));  // before anyone sees it fused
-        {
+          map = store_.ReadMap(id, pb::MAP_DENSE, v, geo->views[v]);
+        } catch (const InputError& e) {  // a map the store lost (a crash): the view is done again
+          spdlog::warn("aggregate: job {}: stored dense map of view {} unreadable ({}): removed, re-issued", id, v,
+                       e.what());
+          std::error_code ec;
+          fs::remove(store_.MapPath(id, pb::MAP_DENSE, v), ec);
           std::lock_guard<std::mutex> lk(job.queue_mu);
-          job.fused[v] = 1;
+          job.unreadable.push_back(v);
+          continue;
         }
-        ++job.views_fused;
+        if (NeedsBackgroundFloor(po)) {  // as lfrecon run: the same function on the same maps
+          DepthMap sparse;
+          try {
+            sparse = store_.ReadMap(id, pb::MAP_SPARSE, v, geo->views[v]);
+          } catch (const InputError& e) {  // the floor is then gated by the dense map alone
+            spdlog::warn("aggregate: job {}: sparse map of view {} unreadable ({}): background floor gated without it",
+                         id, v, e.what());
+          }
+          map = WithBackgroundFloor(map, sparse, geo->views[v], geo->volume, po);
+        }
+        {
+          std::lock_guard<std::mutex> grid(job.grid_mu);
+          job.fusion->Integrate(geo->views[v], map, v);
+          for (int slept = 0; slept < options_.fusion_delay_ms && !job.stop && !StopRequested(); slept += 10)
+            std::this_thread::sleep_for(std::chrono::milliseconds(10));  // fault injection (tests)
+          job.active_voxels = job.fusion->Stats().active_voxels;
+          if (item.second) store_.AppendLine(id, "fused.log", std::to_string(v));  // before anyone sees it fused
+          {
+            std::lock_guard<std::mutex> lk(job.queue_mu);
+            job.fused[v] = 1;
+          }
+          ++job.views_fused;
+        }
+        if (++done == job.replay && job.replay > 0)
+          spdlog::info("aggregate: job {}: {} views replayed from the checkpoint in {:.1f} s", id, job.replay,
+                       replay_timer.Seconds());
+        if (!job.AllFused()) continue;
       }
-      if (++done == job.replay && job.replay > 0)
-        spdlog::info("aggregate: job {}: {} views replayed from the checkpoint in {:.1f} s", id, job.replay,
-                     replay_timer.Seconds());
-      if (job.views_fused < job.num_fused) continue;
-      // Every view fused: the job's outputs. The grid is complete and no other
-      // thread changes it, so exports may read it meanwhile.
+      // Every view fused (of a stream: of its whole plan, after its end): the job's
+      // outputs. The grid is complete and no other thread changes it, so exports
+      // may read it meanwhile.
+      geo = job.Geometry();
       Timer t;
       const fs::path dir = store_.JobDir(id);
-      std::vector<char> frame_ok(job.n, 0);
-      for (int k = 0; k < job.n; ++k) frame_ok[k] = store_.HasFrame(id, k);
+      const int n = static_cast<int>(geo->views.size());
+      std::vector<char> frame_ok(n, 0);
+      for (int k = 0; k < n; ++k) frame_ok[k] = store_.HasFrame(id, k);
       const TriangleMesh raw = job.fusion->ExtractMesh(po.meshing);
       // Each output atomically and durably (temporary name, fsync, rename): DONE means they are whole.
       auto write_ply = [&](const TriangleMesh& m, const fs::path& path) {
@@ -212,7 +221,7 @@ void Aggregator::FusionLoop(Job* jp) const {
       };
       write_ply(raw, dir / "mesh_raw.ply");
       TriangleMesh mesh = raw;
-      ColourMesh(store_, job.geo, frame_ok, &mesh);
+      ColourMesh(store_, *geo, frame_ok, &mesh);
       write_ply(mesh, dir / "mesh.ply");
       if (po.write_vdb) {
         const fs::path tmp = TempPathFor(dir / "grid.vdb");
@@ -283,6 +292,9 @@ pb::JobStatus Aggregator::Status(const Job& job) const {
   s.set_dense_done(job.dense_done);
   s.set_views_fused(job.views_fused);
   s.set_message(job.message);
+  if (job.geo.open && job.message.empty())
+    s.set_message("stream open: " + std::to_string(job.n) + " frames received; the views before frame " +
+                  std::to_string(job.settled) + " are settled and processed now, the rest after its end");
   s.set_seconds(std::chrono::duration<double>(Clock::now() - job.created).count());
   s.set_active_voxels(static_cast<std::uint32_t>(job.active_voxels));
   s.set_leases_expired(job.leases_expired);

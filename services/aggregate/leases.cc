@@ -86,6 +86,8 @@ pb::Envelope Aggregator::HandleTaskRequest(const pb::Envelope& req, const Worker
     ExpireLeases(job);
     if (!job.active) continue;  // a task failed too often
     for (int v = 0; v < job.n; ++v) {
+      // Of an open stream only the settled views: their plan entries are the whole stream's.
+      if (v >= (stage == pb::STAGE_DEPTH ? job.settled_depth : job.settled)) break;
       if (job.leases.count({stage, v})) continue;
       if (others) {  // a task that failed on this worker goes to another one
         const auto t = job.tries.find({stage, v});

@@ -544,6 +544,7 @@ ReconstructionFlags JobFlags(const pb::JobOptions& o) {
   f.no_densify = o.no_densify();
   if (o.has_color_views()) f.color_views = o.color_views();
   f.all_views = o.all_views();
+  if (o.has_max_frame_gap()) f.max_frame_gap = o.max_frame_gap();
   return f;
 }
 
@@ -588,6 +589,7 @@ DatasetOptions ToDatasetOptions(const pb::JobSpec& spec) {
 }
 
 JobGeometry LoadJobGeometry(const JobStore& store, const std::string& id) {
+  if (!fs::exists(store.JobDir(id) / "manifest.pb") && GrowingStream(store, id)) return LoadStreamGeometry(store, id);
   const pb::JobManifest m = store.ReadManifest(id);
   const std::string what = (store.JobDir(id) / "manifest.pb").string();
   JobGeometry g;
@@ -602,6 +604,50 @@ JobGeometry LoadJobGeometry(const JobStore& store, const std::string& id) {
   // Validated with V (the fusion grid), as `lfrecon run` plans its run.
   g.plan = ReconstructionPlan::Compute(g.views, g.volume, g.options);
   return g;
+}
+
+std::optional<pb::StreamOpen> GrowingStream(const JobStore& store, const std::string& id) {
+  if (!JobStore::ValidJobId(id)) return std::nullopt;
+  const fs::path dir = store.JobDir(id);
+  if (fs::exists(dir / "manifest.pb") || !fs::exists(dir / "stream.pb")) return std::nullopt;
+  pb::StreamOpen open;
+  try {
+    ParseFile(dir / "stream.pb", &open);
+    if (!SpecVolume(open.spec())) return std::nullopt;
+  } catch (const std::exception&) {  // ingest checked it at the opening; a stream that cannot grow waits for its end
+    return std::nullopt;
+  }
+  return open;
+}
+
+JobGeometry LoadStreamGeometry(const JobStore& store, const std::string& id) {
+  const std::optional<pb::StreamOpen> open = GrowingStream(store, id);
+  if (!open) throw InputError((store.JobDir(id) / "stream.pb").string(), "not an open stream with V");
+  JobGeometry g;
+  g.id = id;
+  g.open = true;
+  g.volume = *SpecVolume(open->spec());
+  g.options = JobPipelineOptions(open->spec().options());
+  g.plan.fusion = JobFusionOptions(g.options, g.volume);
+  GrowStreamGeometry(store, &g);
+  return g;
+}
+
+bool GrowStreamGeometry(const JobStore& store, JobGeometry* g, bool lazy) {
+  const std::size_t before = g->views.size();
+  for (int k = static_cast<int>(before); store.HasFrame(g->id, k); ++k) {
+    const fs::path path = store.FramePath(g->id, k);
+    pb::Frame f;
+    ParseFile(path, &f);
+    g->views.push_back(CameraFromProto(f.camera(), path.string()));
+    g->names.push_back(f.camera().name());
+  }
+  if (g->views.size() == before) return false;
+  if (lazy && ReconstructionPlan::SettledDepthFrames(static_cast<int>(g->views.size()), false, g->options) == 0)
+    return true;
+  // The plan of the prefix, as ReconstructionPlan::Compute on the whole stream gives it for the settled frames.
+  g->plan = ReconstructionPlan::Compute(g->views, g->volume, g->options);
+  return true;
 }
 
 }  // namespace lfrecon::svc

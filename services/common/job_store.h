@@ -182,7 +182,27 @@ struct JobGeometry {
   // carving frames, fusion options), as `lfrecon run` computes it for the same
   // cameras and options.
   ReconstructionPlan plan;
+  // A client-pushed stream still open (no manifest yet, V given): `views` are
+  // its frames 0..n-1 stored so far (the first gap ends them), `plan` is the
+  // plan of that prefix, final for its settled frames (ReconstructionPlan::
+  // SettledFrames) and, for selection and on_grid, for every frame of it.
+  bool open = false;
 };
+// The manifest's geometry; for an open stream that gives V (GrowingStream), its
+// received prefix (LoadStreamGeometry). Throws InputError / OptionError.
 JobGeometry LoadJobGeometry(const JobStore& store, const std::string& id);
+// The StreamOpen (stream.pb) of `id` when it is a stream whose plan can grow
+// before its end: still open (no manifest yet) and V given in its spec. Without V
+// (estimated from every camera) the plan waits for the end: nothing.
+std::optional<pb::StreamOpen> GrowingStream(const JobStore& store, const std::string& id);
+// The geometry of an open stream (GrowingStream): views = its stored frames 0..n-1
+// (n may be 0: no plan yet, only its fusion options). Throws InputError / OptionError.
+JobGeometry LoadStreamGeometry(const JobStore& store, const std::string& id);
+// Appends the frames stored since (n, n+1, ... while stored) to an open stream's
+// geometry and recomputes its plan; true when any was added. `lazy`: not while
+// no frame settles (ReconstructionPlan::SettledDepthFrames is 0, so nothing of
+// the plan is used yet: a long gap on a shorter stream), which spares a plan per
+// frame; the plan is then the last one computed, of fewer frames.
+bool GrowStreamGeometry(const JobStore& store, JobGeometry* geo, bool lazy = false);
 
 }  // namespace lfrecon::svc

@@ -4,6 +4,7 @@
 #include <unistd.h>
 
 #include <CLI/CLI.hpp>
+#include <algorithm>
 #include <iostream>
 #include <set>
 #include <thread>
@@ -19,6 +20,12 @@ const JobGeometry& StoreCache::Geometry(const std::string& job) {
   auto& g = geometry_[job];
   if (!g) g = std::make_unique<JobGeometry>(LoadJobGeometry(store_, job));
   return *g;
+}
+
+void StoreCache::Cover(const std::string& job, int index) {
+  Geometry(job);
+  JobGeometry& g = *geometry_[job];
+  if (g.open && index >= static_cast<int>(g.views.size())) GrowStreamGeometry(store_, &g);
 }
 
 StoreCache::Entry& StoreCache::Get(const std::string& job, int kind, int index) {
@@ -116,6 +123,11 @@ int RunWorker(const WorkerOptions& o, pb::Stage stage, const std::string& name, 
     try {
       if (!JobStore::ValidJobId(job)) throw std::invalid_argument("invalid job id '" + job + "'");
       if (tasks < o.fail_tasks) throw std::runtime_error("--fail-tasks " + std::to_string(o.fail_tasks) + ": fault injection");
+      // A stream still open: its frames so far (the task's are stored: the aggregator leased it so).
+      int last = static_cast<int>(task.view());
+      for (std::uint32_t k : task.frames()) last = std::max(last, static_cast<int>(k));
+      for (std::uint32_t k : task.voters()) last = std::max(last, static_cast<int>(k));
+      cache.Cover(job, last);
       cache.BeginTask();
       *r->mutable_map() = compute(task, job, cache);
       cache.Trim();

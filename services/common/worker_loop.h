@@ -35,6 +35,10 @@ class StoreCache {
  public:
   StoreCache(const JobStore& store, int capacity) : store_(store), capacity_(capacity) {}
   const JobGeometry& Geometry(const std::string& job);
+  // An open stream's geometry (JobGeometry::open) grown from the store until it
+  // holds view `index`. Called before a task, never during one, so what a task
+  // holds of the geometry stays valid while it runs.
+  void Cover(const std::string& job, int index);
   // The frame of view `index` with PrepareViewImage applied and its on_grid flag
   // from the job's plan (as the depth stage of `lfrecon run` holds it).
   const ViewImage& Frame(const std::string& job, int index);

@@ -9,6 +9,8 @@
 // credits it granted; a frame is answered (its credit returned) once it is
 // stored; at the end of the stream the manifest is written (the plan is the
 // aggregator's, from all the cameras) and the job handed to the aggregator.
+// A stream that gives V is the aggregator's from its opening on: it plans and
+// processes the views as their frames arrive (services/aggregate/stream_plan.cc).
 // The frames are stored as the submit path stores them (common/job_store.h).
 #include <spdlog/spdlog.h>
 
@@ -272,6 +274,16 @@ void StreamWriter(zmq::context_t& context, const IngestOptions& o, const JobStor
     std::lock_guard<std::mutex> lk(s.mu);
     s.closed_why = why;
   };
+  // A stream that gives V is the aggregator's job from now on: it plans its
+  // views as frames arrive (it reads them from the store). One try: an
+  // aggregator that is down finds the stream in the store when it starts.
+  if (SpecVolume(s.open.spec())) {
+    pb::Envelope created = NewEnvelope(id);
+    created.mutable_job_created();
+    if (!agg.Request(created, std::chrono::milliseconds(2000)))
+      spdlog::warn("ingest: stream {}: the aggregator did not answer; it finds the stream in the store when it starts",
+                   id);
+  }
   for (;;) {
     RouterServer::Incoming in;
     {

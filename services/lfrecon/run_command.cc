@@ -41,6 +41,7 @@ struct RunArgs {
   bool mask_carving = false;
   RunOutputFlags outputs;  // mesh formats, point cloud, COLMAP workspace, report.html
   bool all_views = false;
+  std::optional<int> max_frame_gap;
 };
 
 // OUT/sparse_refined/: the refined poses as a COLMAP text model (undistorted cameras).
@@ -75,6 +76,7 @@ int RunPipeline(const RunArgs& args) {
   flags.no_densify = args.no_densify;
   flags.color_views = args.color_views;
   flags.all_views = args.all_views;
+  flags.max_frame_gap = args.max_frame_gap;
   PipelineOptions options = OptionsFromFlags(flags);
   const Dataset ds = Dataset::Open(args.data.Resolve());
   if (!args.views.empty()) options.views = ParseViewRange(args.views, ds.NumViews());
@@ -161,6 +163,9 @@ void AddRunCommand(CLI::App& root, int* exit_code) {
                    "0.5; sparser sequences keep every view). Every frame is still read and serves as a neighbour");
   cmd->add_flag("--all-views", args->all_views,
                 "Process every view (no view selection): depth and fusion of each frame, also on a dense video");
+  cmd->add_option("--max-frame-gap", args->max_frame_gap,
+                  "Views more than this many frames apart are never neighbours (0: no limit; default 1000). "
+                  "`lfrecon stream --max-frame-gap` with the same bound computes the same mesh");
   cmd->add_flag("--no-refine", args->no_refine,
                 "Skip the refinement (voxel carving): mesh.ply is then the fused iso-surface, like mesh_raw.ply");
   cmd->add_flag("--poisson", args->poisson,

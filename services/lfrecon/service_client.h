@@ -53,6 +53,7 @@ struct JobOptionFlags {
   double voxel_mm = 0, sigma_s = 0;
   bool no_densify = false, all_views = false;
   int color_views = 8;
+  int max_frame_gap = -1;  // -1: unset (the default)
   void AddTo(CLI::App* cmd);
   // Checked as the ingest daemon and `lfrecon run` check them (OptionError: exit 2).
   pb::JobOptions ToProto() const;

@@ -115,6 +115,10 @@ void JobOptionFlags::AddTo(CLI::App* cmd) {
                 "Process every view (as lfrecon run --all-views); by default a dense video's views are selected "
                 ">= 0.5 deg apart");
   cmd->add_option("--color-views", color_views, "Frames used to colour the mesh (0: none)")->capture_default_str();
+  cmd->add_option("--max-frame-gap", max_frame_gap,
+                  "Views more than this many frames apart are never neighbours (as lfrecon run --max-frame-gap; 0: "
+                  "no limit; default 1000). With a bound, a stream's views are processed while it is open, 2 gaps "
+                  "behind its newest frame; without, after its end");
 }
 
 pb::JobOptions JobOptionFlags::ToProto() const {
@@ -125,6 +129,7 @@ pb::JobOptions JobOptionFlags::ToProto() const {
   o.set_no_densify(no_densify);
   o.set_color_views(color_views);
   o.set_all_views(all_views);
+  if (max_frame_gap != -1) o.set_max_frame_gap(max_frame_gap);
   svc::JobPipelineOptions(o);  // every job option checked here, as lfrecon run does (exit 2)
   return o;
 }

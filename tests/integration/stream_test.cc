@@ -1,11 +1,13 @@
 // Client-pushed streams (proto/README.md "Streams"): `lfrecon stream` of a
-// generated loop spaced under 0.5° gives lfrecon run's mesh; a client faster
+// generated loop spaced under 0.5° gives lfrecon run's mesh, also when its
+// views are planned and fused while it streams (a frame-gap bound); a client faster
 // than ingest is held to its credits; repeated and out-of-order frames follow
 // the documented policy (a repeat is ignored, any order is accepted, gaps fail
 // the job at the end); a client that dies mid-stream fails its job after the
 // stream timeout. Real daemons over ipc:// in a temporary folder.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <chrono>
 #include <memory>
 #include <nlohmann/json.hpp>
@@ -175,6 +177,138 @@ TEST_F(StreamTest, StreamOfDenseArcEqualsRun) {
               "identical to lfrecon run's, mesh_raw %zu vertices, largest difference %.3g m\n",
               kFrames, st["frames_per_second"].get<double>(), st["bytes_per_pixel"].get<double>(),
               st["max_in_flight"].get<int>(), identical, compared, svc_mesh.vertices.size(), max_dv);
+}
+
+// The growing plan (issue 14 §1): a stream that gives V and a frame-gap bound
+// is planned as its frames arrive. Views whose plan entries no later frame can
+// change (ReconstructionPlan::SettledFrames) are leased and fused while the
+// stream is open: status counts them, and `--follow` and a mid-stream export
+// return a mesh that grows. At the end the whole plan is lfrecon run's
+// (--max-frame-gap alike), so the mesh is the same. A second stream survives
+// kill -9 of the aggregator mid-stream: the restarted one resumes the open
+// stream from the store and its checkpoint, and ends with the same mesh.
+TEST_F(StreamTest, GrowingPlanFusesWhileStreamingAndEqualsRun) {
+  constexpr int kFrames = 90, kGap = 15;
+  const fs::path data = Synth(kFrames, 96, 54);
+  const std::string gap = " --max-frame-gap " + std::to_string(kGap);
+  const std::string voxel = " --voxel-mm " + std::to_string(kVoxelMm);
+  const fs::path run_dir = tmp_.path() / "run";
+  Sh(kBin + "lfrecon -q run --dataset " + data.string() + " --no-refine-poses --no-refine" + voxel + gap + " --out " +
+     run_dir.string());
+  const nlohmann::json report = nlohmann::json::parse(ReadFileBytes(run_dir / "report.json"));
+  const int selected = report["views"]["processed"];
+  EXPECT_EQ(selected, kFrames / 2);
+  const TriangleMesh run_mesh = ReadPly(run_dir / "mesh_raw.ply");
+  ASSERT_GT(run_mesh.triangles.size(), 100u);
+  auto largest_difference = [&](const TriangleMesh& m) {
+    EXPECT_EQ(m.vertices.size(), run_mesh.vertices.size());
+    EXPECT_EQ(m.triangles.size(), run_mesh.triangles.size());
+    if (m.vertices.size() != run_mesh.vertices.size()) return 1e9;
+    double d = 0;
+    for (std::size_t k = 0; k < m.vertices.size(); ++k)
+      d = std::max(d, static_cast<double>((m.vertices[k] - run_mesh.vertices[k]).norm()));
+    return d;
+  };
+  StartStack({}, true);
+  JobStore js(store_);
+  auto export_vertices = [&](const std::string& job) -> long {
+    RequestClient c(context_, agg_);
+    pb::Envelope req = NewEnvelope(job);
+    req.mutable_export_request();
+    auto r = c.Request(req, milliseconds(20000));
+    return r && r->has_export_reply() ? static_cast<long>(r->export_reply().vertices()) : -1;
+  };
+
+  // 1. `lfrecon stream --follow` at a camera's pace, watched from outside while it streams.
+  const fs::path follow = tmp_.path() / "follow.ply";
+  DaemonProcess* cli = Start("lfrecon", {"-q", "stream", "--ingest", ing_, "--aggregate", agg_, "--dataset",
+                                         data.string(), "--voxel-mm", std::to_string(kVoxelMm), "--max-frame-gap",
+                                         std::to_string(kGap), "--rate", "10", "--credits", "4", "--follow",
+                                         follow.string(), "--follow-s", "0.3", "--wait-s", "400"});
+  std::string job;
+  for (int i = 0; i < 200 && job.empty(); ++i) {
+    std::this_thread::sleep_for(milliseconds(50));
+    const std::string log = cli->Log();
+    if (log.find('\n') != std::string::npos) job = log.substr(0, log.find('\n'));
+  }
+  ASSERT_TRUE(JobStore::ValidJobId(job)) << cli->Log();
+  int fused_open = 0, frames_first_fused = 0;  // views fused while open; frames received when the first was seen
+  std::vector<long> exports_open, follow_open;
+  std::string message_open;
+  while (cli->Running()) {
+    const pb::JobStatus s = Status(job);
+    if (s.state() == pb::STATE_INGESTING && s.views_fused() > 0) {
+      if (fused_open == 0) frames_first_fused = static_cast<int>(s.frames_spooled());
+      fused_open = std::max<int>(fused_open, static_cast<int>(s.views_fused()));
+      message_open = s.message();
+      const long v = export_vertices(job);
+      if (Status(job).state() == pb::STATE_INGESTING && v > 0) exports_open.push_back(v);
+      if (fs::exists(follow) && Status(job).state() == pb::STATE_INGESTING)
+        follow_open.push_back(static_cast<long>(ReadPly(follow).vertices.size()));
+    }
+    std::this_thread::sleep_for(milliseconds(150));
+  }
+  EXPECT_EQ(cli->WaitExit(milliseconds(1000)), 0) << cli->LogTail();
+  EXPECT_NE(LastLine(cli->Log()).find("DONE"), std::string::npos) << cli->LogTail();
+  // Views were fused while the stream was open, and the mesh grew meanwhile.
+  EXPECT_GT(fused_open, 0);
+  EXPECT_LT(frames_first_fused, kFrames);
+  EXPECT_NE(message_open.find("stream open"), std::string::npos) << message_open;
+  ASSERT_FALSE(exports_open.empty());
+  ASSERT_FALSE(follow_open.empty());
+  EXPECT_GT(*std::max_element(follow_open.begin(), follow_open.end()), 0);
+  // The end: lfrecon run's views and mesh.
+  pb::JobStatus s = Status(job);
+  EXPECT_EQ(s.state(), pb::STATE_DONE) << s.message();
+  EXPECT_EQ(s.views_fused(), static_cast<unsigned>(selected));
+  const double followed_difference = largest_difference(ReadPly(store_ / job / "mesh_raw.ply"));
+  EXPECT_EQ(followed_difference, 0.0);
+
+  // 2. Pushed by a client; the aggregator killed (-9) once views are fused, and restarted.
+  BoundingBox v;
+  const std::vector<pb::Frame> frames = Frames(data, &v);
+  StreamClient client(context_, ing_);
+  pb::StreamOpen open = Open(v, 4);
+  open.mutable_spec()->mutable_options()->set_voxel_size(kVoxelMm / 1000.0);
+  open.mutable_spec()->mutable_options()->set_max_frame_gap(kGap);
+  client.Open(open, milliseconds(10000));
+  const std::string job2 = client.job_id();
+  constexpr int kBeforeKill = 60;
+  for (int k = 0; k < kBeforeKill; ++k) client.Push(frames[static_cast<std::size_t>(k)], milliseconds(10000));
+  for (int i = 0; i < 600 && Status(job2).views_fused() == 0; ++i) std::this_thread::sleep_for(milliseconds(100));
+  const pb::JobStatus before = Status(job2);
+  EXPECT_EQ(before.state(), pb::STATE_INGESTING);
+  EXPECT_GT(before.views_fused(), 0u);
+  const long vertices_before = export_vertices(job2);
+  EXPECT_GT(vertices_before, 0);
+  procs_[0]->Kill(SIGKILL);
+  Start("lfrecon-aggregate", {"--bind", agg_, "--store", store_.string()});
+  for (int k = kBeforeKill; k < kFrames; ++k) client.Push(frames[static_cast<std::size_t>(k)], milliseconds(10000));
+  // Every frame is in, the end not yet: the views before frame 90 - 2 gaps (every second one) are
+  // settled and all get fused; the rest wait for the end.
+  const unsigned settled_views = (kFrames - 2 * kGap) / 2;
+  for (int i = 0; i < 1200 && Status(job2).views_fused() < settled_views; ++i)
+    std::this_thread::sleep_for(milliseconds(100));
+  std::this_thread::sleep_for(milliseconds(500));
+  const pb::JobStatus open_all = Status(job2);
+  EXPECT_EQ(open_all.state(), pb::STATE_INGESTING);
+  EXPECT_EQ(open_all.views_fused(), settled_views);
+  const long vertices_open = export_vertices(job2);
+  EXPECT_GT(vertices_open, vertices_before);
+  EXPECT_EQ(client.End(kFrames, milliseconds(60000)).num_frames(), static_cast<unsigned>(kFrames));
+  for (int i = 0; i < 1200 && !(s = Status(job2), s.state() == pb::STATE_DONE || s.state() == pb::STATE_FAILED); ++i)
+    std::this_thread::sleep_for(milliseconds(100));
+  EXPECT_EQ(s.state(), pb::STATE_DONE) << s.message();
+  EXPECT_EQ(s.views_fused(), static_cast<unsigned>(selected));
+  const double restarted_difference = largest_difference(ReadPly(store_ / job2 / "mesh_raw.ply"));
+  EXPECT_EQ(restarted_difference, 0.0);
+  std::printf("growing plan: %d frames (gap %d), %d of %d views fused while open (the first seen at %d frames), "
+              "mid-stream exports %ld -> %ld vertices, %zu --follow meshes while open; mesh_raw vs lfrecon run: "
+              "largest difference %.3g m; aggregator killed after %u views fused (%d frames pushed, %ld vertices), "
+              "%u fused before the end (%ld vertices): %.3g m\n",
+              kFrames, kGap, fused_open, selected, frames_first_fused, exports_open.front(), exports_open.back(),
+              follow_open.size(), followed_difference, before.views_fused(), kBeforeKill, vertices_before,
+              open_all.views_fused(), vertices_open, restarted_difference);
 }
 
 // A client faster than ingest (each frame takes ingest 40 ms to store): it is
