@@ -69,7 +69,9 @@ void AddStreamCommand(CLI::App& root, int* exit_code) {
       "stream",
       "Stream a dataset's frames to the service as a live camera would (a client-pushed job): opens the job, prints "
       "its id, pushes each frame as stored on disk (a video frame as lossless PNG) with its camera, ends the stream. "
-      "The job's plan is computed when the stream ends, so it computes what lfrecon run computes on the same frames");
+      "With --max-frame-gap N its views are planned and fused while it streams (2 N frames behind the newest), the "
+      "rest after its end; without, all after its end. It computes what lfrecon run computes on the same frames "
+      "(with the same --max-frame-gap)");
   a->data.AddTo(cmd);
   AddEndpointFlags(cmd, &a->ep, true);
   a->job.AddTo(cmd);
@@ -83,8 +85,8 @@ void AddStreamCommand(CLI::App& root, int* exit_code) {
   cmd->add_option("--wait-s", a->wait_s, "With --wait or --follow: give up after this many seconds")
       ->capture_default_str();
   cmd->add_option("--follow", a->follow,
-                  "Rewrite this PLY with the mesh fused so far every --follow-s seconds (once the stream has ended "
-                  "and views are fused) until the job ends; implies --wait");
+                  "Rewrite this PLY with the mesh fused so far every --follow-s seconds (while streaming with "
+                  "--max-frame-gap, else once the stream has ended) until the job ends; implies --wait");
   cmd->add_option("--follow-s", a->follow_s, "Seconds between --follow exports")->capture_default_str();
   cmd->add_option("--stats", a->stats,
                   "Write the stream's figures as JSON (frames, seconds, frames/s, bytes, credits, most in flight)");
