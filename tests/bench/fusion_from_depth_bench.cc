@@ -6,6 +6,10 @@
 //   fusion_from_depth_bench DATASET DEPTH_OUT [--sigma-s 0.1,0.15,0.2] [--voxel-mm 2] [--activation-min-confidence 0.01]
 //       [--refine 1] [--analyze 1] [--keep-mesh DIR]   (run without options for all of them)
 //   fusion_from_depth_bench DATASET - --mesh MESH.ply   (scores and analyses one mesh: where its error lies)
+//   fusion_from_depth_bench DATASET DEPTH_OUT --probability-clamp 0.03 --score 0 [--max-views N] [--keep-mesh DIR]
+//       (the cost of fusion alone with `lfrecon run`'s fusion options: Integrate and ExtractMesh timed per phase,
+//        no scoring; N: every k-th map so that at most N are fused. Under valgrind, count only the fusion with
+//        --toggle-collect='*ProbabilisticFusion::Integrate*' --toggle-collect='*ProbabilisticFusion::ExtractMesh*')
 //
 // DEPTH_OUT holds depth/<stem>.pfm and confidence/<stem>.pfm; labels are not
 // stored, so a depth is foreground when its point lies inside V.
@@ -401,7 +405,8 @@ int main(int argc, char** argv) {
                  "  [--activation-min-confidence C] [--threshold H] [--band B] [--free-space-margin M] [--min-views N]\n"
                  "  [--refine cp,p,c (carve+Poisson, Poisson, carve+marching cubes)] [--carving-views N] [--consistency T]\n"
                  "  [--min-component-cm2 a,b,...] [--analyze 0|1]\n"
-                 "  [--keep-mesh DIR] [--mesh FILE.ply (analyse this mesh only; DEPTH_OUT may be -)]\n",
+                 "  [--keep-mesh DIR] [--mesh FILE.ply (analyse this mesh only; DEPTH_OUT may be -)]\n"
+                 "  [--score 0 (time fusion only: no scoring)] [--max-views N]\n",
                  argv[0]);
     return 2;
   }
@@ -415,7 +420,8 @@ int main(int argc, char** argv) {
   std::vector<double> clamps = {FusionOptions{}.probability_clamp};
   int carving_views = 24;
   std::vector<int> min_views_list = {1};
-  bool refine = false, analyze = false;
+  bool refine = false, analyze = false, score = true;
+  int max_views = 0;
   double consistency = -1;
   double oracle_clean_mm = -1;
   double measured_floor = 0;
@@ -492,6 +498,10 @@ int main(int argc, char** argv) {
       std::sscanf(v.c_str(), "%d,%lf,%d", &cons_views, &cons_min, &cons_radius);
     } else if (k == "--oracle-clean") {  // diagnosis: keep only views with GT depth; drop depths off it by > MM
       oracle_clean_mm = std::atof(v.c_str());
+    } else if (k == "--score") {
+      score = std::atoi(v.c_str()) != 0;
+    } else if (k == "--max-views") {
+      max_views = std::atoi(v.c_str());
     } else if (k == "--analyze") {
       analyze = std::atoi(v.c_str()) != 0;
     } else if (k == "--keep-mesh") {
@@ -544,6 +554,17 @@ int main(int argc, char** argv) {
     if (fs::exists(c)) m.confidence = ReadPfm(c);
     ids.push_back(i);
     maps.push_back(std::move(m));
+  }
+  if (max_views > 0 && static_cast<int>(maps.size()) > max_views) {  // every k-th map
+    const std::size_t k = (maps.size() + max_views - 1) / max_views;
+    std::vector<int> kept_ids;
+    std::vector<DepthMap> kept;
+    for (std::size_t i = 0; i < maps.size(); i += k) {
+      kept_ids.push_back(ids[i]);
+      kept.push_back(std::move(maps[i]));
+    }
+    ids = std::move(kept_ids);
+    maps = std::move(kept);
   }
   std::printf("%zu depth maps from %s\n", maps.size(), depth_dir.c_str());
   if (oracle_clean_mm >= 0) {
@@ -719,13 +740,27 @@ int main(int argc, char** argv) {
     Timer t;
     for (std::size_t k = 0; k < maps.size(); ++k) fusion.Integrate(ds.View(ids[k]), maps[k], ids[k]);
     const double fuse_s = t.Seconds();
+    if (!score) {  // the cost of fusion alone
+      const FusionStats st = fusion.Stats();
+      std::printf("fusion of %zu views: %.2f s (activate %.2f, back-fill %.2f, update %.2f), %zu active voxels\n",
+                  maps.size(), fuse_s, st.activate_s, st.backfill_s, st.update_s, st.active_voxels);
+    }
     for (double threshold : thresholds)
     for (int min_views : min_views_list) {
       MeshingOptions meshing;
       meshing.threshold = threshold;
       std::printf("threshold %.2f, min views %d\n", threshold < 0 ? fo.surface_threshold : threshold, min_views);
       meshing.min_views = min_views;
+      Timer tm;
       const TriangleMesh mesh = fusion.ExtractMesh(meshing);
+      if (!score) {
+        std::printf("meshing: %.2f s, %zu triangles\n", tm.Seconds(), mesh.triangles.size());
+        if (!keep_dir.empty()) {
+          fs::create_directories(keep_dir);
+          WritePly(mesh, keep_dir / "fused.ply");
+        }
+        continue;
+      }
       std::printf("%-7.3f  fused    %s   %9zu  %7zu  %6.1f\n", s, score_line(mesh).c_str(), mesh.triangles.size(),
                   fusion.Stats().active_voxels, fuse_s);
       std::fflush(stdout);
