@@ -12,6 +12,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
 #include <mutex>
 #include <stdexcept>
 #include <string>
@@ -34,6 +35,10 @@ using EvidenceLeaf = EvidenceTree::LeafNodeType;
 using MaskLeaf = openvdb::MaskTree::LeafNodeType;
 using openvdb::Coord;
 using openvdb::Vec2s;
+// SurfaceEvidence::BlockLogProbability evaluates one leaf: 8^3 voxels, voxel n = 64 x + 8 y + z,
+// its active bit n % 64 of mask word n / 64.
+static_assert(EvidenceLeaf::DIM == SurfaceEvidence::kBlockDim && MaskLeaf::DIM == SurfaceEvidence::kBlockDim);
+static_assert(EvidenceLeaf::NodeMaskType::WORD_COUNT == SurfaceEvidence::kBlockDim);
 
 void InitOpenVdb() {
   static std::once_flag once;
@@ -70,7 +75,9 @@ struct ProbabilisticFusion::Impl {
   openvdb::MaskTree Activate(const CompactDepthView& cv) const;
   void BackFill(const openvdb::MaskTree& fresh, std::size_t num_previous);
   void Apply(const SurfaceEvidence& evidence);
-  bool LeafOutsideView(const Coord& origin, const PinholeView& view) const;
+  SurfaceEvidence::BlockCentres BlockCentres(const Coord& origin) const;  // of a leaf's voxels
+  // values[n] += (lp[n], 1) for each voxel n of a leaf whose bit is set in `has`.
+  static void AddEvidence(Vec2s* values, const float* lp, const std::uint64_t* has);
   void EnforceBudget();
   bool warned_budget = false;
 };
@@ -159,59 +166,53 @@ void ProbabilisticFusion::Impl::BackFill(const openvdb::MaskTree& fresh, std::si
   evidence.reserve(num_previous);
   for (std::size_t i = 0; i < num_previous; ++i) evidence.emplace_back(*views[i], options);
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, mask_leaves.size()), [&](const auto& range) {
+    std::uint64_t active[SurfaceEvidence::kBlockDim], has[SurfaceEvidence::kBlockDim];
+    float lp[SurfaceEvidence::kBlockVoxels];
     for (std::size_t li = range.begin(); li < range.end(); ++li) {
       const MaskLeaf& mask = *mask_leaves[li];
       EvidenceLeaf* leaf = tree.probeLeaf(mask.origin());
       if (!leaf) continue;  // cannot happen: fresh was merged into the tree
-      for (auto it = mask.cbeginValueOn(); it; ++it) {
-        const Eigen::Vector3d x = Center(it.getCoord());
-        Vec2s v = leaf->getValue(it.pos());
-        for (const SurfaceEvidence& ev : evidence) {
-          float lp;
-          if (ev.LogProbability(x, &lp)) {
-            v[0] += lp;
-            v[1] += 1.0f;
-          }
-        }
-        leaf->setValueOnly(it.pos(), v);
+      const SurfaceEvidence::BlockCentres centres = BlockCentres(mask.origin());
+      for (int w = 0; w < SurfaceEvidence::kBlockDim; ++w) active[w] = mask.getValueMask().getWord<std::uint64_t>(w);
+      Vec2s* values = leaf->buffer().data();
+      // View by view, so each voxel still sums its views' log P in the order of the store.
+      for (const SurfaceEvidence& ev : evidence) {
+        ev.BlockLogProbability(centres, active, lp, has);
+        AddEvidence(values, lp, has);
       }
     }
   });
 }
 
-bool ProbabilisticFusion::Impl::LeafOutsideView(const Coord& origin, const PinholeView& view) const {
-  const int dim = static_cast<int>(EvidenceLeaf::DIM) - 1;
-  bool all_behind = true, left = true, right = true, top = true, bottom = true;
-  for (int k = 0; k < 8; ++k) {
-    const Coord c = origin + Coord((k & 1) * dim, ((k >> 1) & 1) * dim, ((k >> 2) & 1) * dim);
-    const Eigen::Vector3d x = view.R * Center(c) + view.t;
-    if (x.z() <= 1e-9) return false;  // straddles the camera plane: keep it (rare)
-    all_behind = false;
-    const Eigen::Vector3d h = view.K * x;
-    const double u = h.x() / h.z(), v = h.y() / h.z();
-    left &= u < -1;
-    right &= u > view.width + 1;
-    top &= v < -1;
-    bottom &= v > view.height + 1;
+SurfaceEvidence::BlockCentres ProbabilisticFusion::Impl::BlockCentres(const Coord& origin) const {
+  SurfaceEvidence::BlockCentres b;
+  for (int t = 0; t < SurfaceEvidence::kBlockDim; ++t) {
+    b.x[t] = Center(origin.offsetBy(t, 0, 0)).x();
+    b.y[t] = Center(origin.offsetBy(0, t, 0)).y();
+    b.z[t] = Center(origin.offsetBy(0, 0, t)).z();
   }
-  return all_behind || left || right || top || bottom;
+  return b;
+}
+
+void ProbabilisticFusion::Impl::AddEvidence(Vec2s* values, const float* lp, const std::uint64_t* has) {
+  for (int i = 0; i < SurfaceEvidence::kBlockDim; ++i)
+    for (std::uint64_t w = has[i]; w; w &= w - 1) {
+      const int n = i * 64 + __builtin_ctzll(w);
+      values[n] = Vec2s(values[n][0] + lp[n], values[n][1] + 1.0f);
+    }
 }
 
 void ProbabilisticFusion::Impl::Apply(const SurfaceEvidence& evidence) {
   std::vector<EvidenceLeaf*> leaves;
   tree.getNodes(leaves);
-  const PinholeView& view = evidence.view().view();
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, leaves.size()), [&](const auto& range) {
+    std::uint64_t active[SurfaceEvidence::kBlockDim], has[SurfaceEvidence::kBlockDim];
+    float lp[SurfaceEvidence::kBlockVoxels];
     for (std::size_t li = range.begin(); li < range.end(); ++li) {
       EvidenceLeaf& leaf = *leaves[li];
-      if (LeafOutsideView(leaf.origin(), view)) continue;
-      for (auto it = leaf.beginValueOn(); it; ++it) {
-        float lp;
-        if (evidence.LogProbability(Center(it.getCoord()), &lp)) {
-          const Vec2s v = *it;
-          it.setValue(Vec2s(v[0] + lp, v[1] + 1.0f));
-        }
-      }
+      for (int w = 0; w < SurfaceEvidence::kBlockDim; ++w) active[w] = leaf.getValueMask().getWord<std::uint64_t>(w);
+      evidence.BlockLogProbability(BlockCentres(leaf.origin()), active, lp, has);
+      AddEvidence(leaf.buffer().data(), lp, has);
     }
   });
 }

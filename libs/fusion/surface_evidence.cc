@@ -5,6 +5,17 @@
 #include <limits>
 
 namespace lfrecon {
+namespace {
+
+// Set bits of w (SWAR: the build targets baseline x86-64, without POPCNT).
+int PopCount(std::uint64_t w) {
+  w = w - ((w >> 1) & 0x5555555555555555ULL);
+  w = (w & 0x3333333333333333ULL) + ((w >> 2) & 0x3333333333333333ULL);
+  w = (w + (w >> 4)) & 0x0f0f0f0f0f0f0f0fULL;
+  return static_cast<int>((w * 0x0101010101010101ULL) >> 56);
+}
+
+}  // namespace
 
 CompactDepthView::CompactDepthView(const PinholeView& view, const DepthMap& depth, const BoundingBox& volume)
     : view_(view) {
@@ -75,12 +86,6 @@ CompactDepthView::CompactDepthView(const PinholeView& view, const DepthMap& dept
       if (p.confidence == 0) p = Pixel{};
     }
   }
-}
-
-double CompactDepthView::Depth(const Pixel& p) const {
-  if (p.depth == 0) return 0;
-  if (p.depth == kBeyond) return std::numeric_limits<double>::infinity();
-  return near_ + (p.depth - 1) * step_;
 }
 
 int CompactDepthView::CountForeground() const {
@@ -161,6 +166,39 @@ SurfaceEvidence::SurfaceEvidence(const CompactDepthView& view, const FusionOptio
   log_clamp_lo_ = std::log(options.probability_clamp);
   log_clamp_hi_ = std::log1p(-options.probability_clamp);
   bilinear_ = options.sampling == DepthSampling::kBilinear;
+
+  // Tables for the nearest-sampling path of FromProjection. A stored
+  // confidence is a byte b, c_i = b / 255, so free space (c = -c_i) takes 256
+  // values. In the band, log P >= log(1-ε) (clamped) once c >= c_hi with
+  // exp(-2 c_hi / σ_s^2) = ε / (1 - ε); eq. 11 gives c >= c_hi * (1 + 1e-9)
+  // while |δ|^2 <= 2 σ_v^2 ln(c_i / (c_hi (1 + 1e-9))) (1 - 1e-9): the margins
+  // are ~10^6 times double rounding, so the shortcut returns exactly what
+  // the full formula returns (checked once more on c below).
+  const double eps = options.probability_clamp;
+  const double c_hi = -std::log(eps / (1.0 - eps)) / two_over_s2_ * (1.0 + 1e-9);
+  const bool shortcut = LogPOfC(c_hi) == static_cast<float>(log_clamp_hi_);
+  for (int b = 0; b < 256; ++b) {
+    const double conf = b / 255.0;
+    free_log_p_[b] = LogPOfC(-conf);
+    clamped_within_sq_[b] = shortcut && conf > c_hi ? 2.0 * sigma_v_ * sigma_v_ * std::log(conf / c_hi) * (1.0 - 1e-9) : -1.0;
+  }
+}
+
+float SurfaceEvidence::LogPOfC(double c) const {
+  // Eqs. 12-13: log(1 / (1 + exp(-2c/σ_s^2))), computed stably, then clamped.
+  const double a = -two_over_s2_ * c;
+  const double lp = a > 0 ? -(a + std::log1p(std::exp(-a))) : -std::log1p(std::exp(a));
+  return static_cast<float>(std::clamp(lp, log_clamp_lo_, log_clamp_hi_));
+}
+
+Eigen::Vector3d SurfaceEvidence::Project(const Eigen::Vector3d& x) const {
+  // Rows 0 and 1 as ((a + b) + c) + p, row 2 as (a + (b + c)) + p: the order
+  // of Eigen's P * x + p for 3x3 doubles with SSE2 (rows 0-1 one packet, row 2
+  // a scalar reduction), kept so that fusion results stay those of before.
+  const double a0 = P_(0, 0) * x.x(), b0 = P_(0, 1) * x.y(), c0 = P_(0, 2) * x.z();
+  const double a1 = P_(1, 0) * x.x(), b1 = P_(1, 1) * x.y(), c1 = P_(1, 2) * x.z();
+  const double a2 = P_(2, 0) * x.x(), b2 = P_(2, 1) * x.y(), c2 = P_(2, 2) * x.z();
+  return {((a0 + b0) + c0) + p_.x(), ((a1 + b1) + c1) + p_.y(), (a2 + (b2 + c2)) + p_.z()};
 }
 
 double SurfaceEvidence::Probability(double c, double sigma_s, double clamp) {
@@ -209,11 +247,39 @@ bool SurfaceEvidence::Sample(double u, double v, DepthLabel* label, double* dept
 }
 
 bool SurfaceEvidence::LogProbability(const Eigen::Vector3d& x, float* log_p, double* c_out) const {
-  const Eigen::Vector3d h = P_ * x + p_;
-  const double z = h.z();
+  const Eigen::Vector3d h = Project(x);
+  return FromProjection(h.x(), h.y(), h.z(), log_p, c_out);
+}
+
+bool SurfaceEvidence::FromProjection(double h0, double h1, double z, float* log_p, double* c_out) const {
   if (!(z > 1e-9)) return false;
-  const double u = h.x() / z, v = h.y() / z;
+  double u = h0 / z, v = h1 / z;
   if (!(u >= 0 && v >= 0 && u < view_->width() && v < view_->height())) return false;
+  if (!bilinear_ && !c_out) {
+    // Nearest sampling: Sample and the formulas below with the per-byte tables.
+    const CompactDepthView& m = *view_;
+    if (m.block() > 1) {
+      u /= m.block();
+      v /= m.block();
+    }
+    const CompactDepthView::Pixel& p = m.at(static_cast<int>(v), static_cast<int>(u));
+    if (p.depth == 0 || p.confidence == 0) return false;
+    if (CompactDepthView::Label(p) == DepthLabel::kForeground) {
+      const double delta = z - m.Depth(p);
+      if (delta > band_) return false;
+      if (carve_front_ && delta < -margin_) {
+        *log_p = free_log_p_[p.confidence];
+      } else if (delta * delta <= clamped_within_sq_[p.confidence]) {
+        *log_p = static_cast<float>(log_clamp_hi_);
+      } else {
+        *log_p = LogPOfC(CompactDepthView::Confidence(p) * std::exp(-delta * delta / (2.0 * sigma_v_ * sigma_v_)));
+      }
+    } else {
+      if (z > m.Depth(p)) return false;
+      *log_p = free_log_p_[p.confidence];
+    }
+    return true;
+  }
   DepthLabel label;
   double d, conf;
   if (!Sample(u, v, &label, &d, &conf)) return false;
@@ -231,12 +297,78 @@ bool SurfaceEvidence::LogProbability(const Eigen::Vector3d& x, float* log_p, dou
     if (z > d) return false;  // behind a background surface that lies in front of it
     c = -conf;                // free space along a background ray (§1.5)
   }
-  // Eqs. 12-13: log(1 / (1 + exp(-2c/σ_s^2))), computed stably, then clamped.
-  const double a = -two_over_s2_ * c;
-  const double lp = a > 0 ? -(a + std::log1p(std::exp(-a))) : -std::log1p(std::exp(a));
-  *log_p = static_cast<float>(std::clamp(lp, log_clamp_lo_, log_clamp_hi_));
+  *log_p = LogPOfC(c);
   if (c_out) *c_out = c;
   return true;
+}
+
+void SurfaceEvidence::BlockByVoxel(const BlockCentres& centres, const std::uint64_t active[kBlockDim],
+                                   float log_p[kBlockVoxels], std::uint64_t has[kBlockDim]) const {
+  for (int i = 0; i < kBlockDim; ++i)
+    for (std::uint64_t w = active[i]; w; w &= w - 1) {
+      const int b = __builtin_ctzll(w);
+      if (LogProbability(Eigen::Vector3d(centres.x[i], centres.y[b >> 3], centres.z[b & 7]), &log_p[i * 64 + b]))
+        has[i] |= std::uint64_t{1} << b;
+    }
+}
+
+void SurfaceEvidence::BlockLogProbability(const BlockCentres& centres, const std::uint64_t active[kBlockDim],
+                                          float log_p[kBlockVoxels], std::uint64_t has[kBlockDim]) const {
+  constexpr int D = kBlockDim;
+  int count = 0;
+  for (int i = 0; i < D; ++i) {
+    has[i] = 0;
+    count += PopCount(active[i]);
+  }
+  if (count == 0) return;
+  if (count >= 8) {
+    // The block's 8 corner voxels: when all lie beyond one image border
+    // (1 px margin) and in front of the camera, so does every voxel (their
+    // projections are in the corners' convex hull): none is seen.
+    bool left = true, right = true, top = true, bottom = true;
+    for (int q = 0; q < 8 && (left || right || top || bottom); ++q) {
+      const int i = (q & 1) * (D - 1), j = ((q >> 1) & 1) * (D - 1), k = ((q >> 2) & 1) * (D - 1);
+      const Eigen::Vector3d h = Project(Eigen::Vector3d(centres.x[i], centres.y[j], centres.z[k]));
+      if (!(h.z() > 1e-9)) return BlockByVoxel(centres, active, log_p, has);  // straddles the camera plane
+      const double u = h.x() / h.z(), v = h.y() / h.z();
+      left &= u < -1;
+      right &= u > view_->width() + 1;
+      top &= v < -1;
+      bottom &= v > view_->height() + 1;
+    }
+    if (left || right || top || bottom) return;
+  }
+  // Sparse block: the per-axis terms would cost more than they save.
+  if (count < 24) return BlockByVoxel(centres, active, log_p, has);
+  // Per-axis products, then the sums of Project in its order: rows 0-1
+  // ((a + b) + c) + p with (a + b) per (i, j); row 2 (a + (b + c)) + p with
+  // (b + c) per (j, k).
+  double a[3][D], bb[3][D], cc[3][D];
+  for (int t = 0; t < D; ++t)
+    for (int r = 0; r < 3; ++r) {
+      a[r][t] = P_(r, 0) * centres.x[t];
+      bb[r][t] = P_(r, 1) * centres.y[t];
+      cc[r][t] = P_(r, 2) * centres.z[t];
+    }
+  double bc2[D][D];
+  for (int j = 0; j < D; ++j)
+    for (int k = 0; k < D; ++k) bc2[j][k] = bb[2][j] + cc[2][k];
+  const double p0 = p_.x(), p1 = p_.y(), p2 = p_.z();
+  for (int i = 0; i < D; ++i) {
+    if (!active[i]) continue;
+    double ab0[D], ab1[D];
+    for (int j = 0; j < D; ++j) {
+      ab0[j] = a[0][i] + bb[0][j];
+      ab1[j] = a[1][i] + bb[1][j];
+    }
+    for (std::uint64_t w = active[i]; w; w &= w - 1) {
+      const int b = __builtin_ctzll(w), j = b >> 3, k = b & 7;
+      const double h0 = (ab0[j] + cc[0][k]) + p0;
+      const double h1 = (ab1[j] + cc[1][k]) + p1;
+      const double h2 = (a[2][i] + bc2[j][k]) + p2;
+      if (FromProjection(h0, h1, h2, &log_p[i * 64 + b], nullptr)) has[i] |= std::uint64_t{1} << b;
+    }
+  }
 }
 
 }  // namespace lfrecon

@@ -10,6 +10,7 @@
 #include <Eigen/Core>
 #include <cstddef>
 #include <cstdint>
+#include <limits>
 #include <vector>
 
 #include "depth/depth_map.h"
@@ -55,7 +56,11 @@ class CompactDepthView {
   int grid_height() const { return grid_height_; }
   const Pixel& at(int row, int col) const { return pixels_[static_cast<std::size_t>(row) * grid_width_ + col]; }
   // Decoded depth (metres; +infinity for kBeyond, 0 for none) and confidence in [0, 1].
-  double Depth(const Pixel& p) const;
+  double Depth(const Pixel& p) const {
+    if (p.depth == 0) return 0;
+    if (p.depth == kBeyond) return std::numeric_limits<double>::infinity();
+    return near_ + (p.depth - 1) * step_;
+  }
   static double Confidence(const Pixel& p) { return p.confidence / 255.0; }
   static DepthLabel Label(const Pixel& p) { return static_cast<DepthLabel>(p.label); }
 
@@ -100,10 +105,36 @@ class SurfaceEvidence {
   // Eqs. 12-13 for a confidence c, clamped to [ε, 1-ε].
   static double Probability(double c, double sigma_s, double clamp);
 
+  // The voxel centres of a block of 8 x 8 x 8 voxels (an OpenVDB leaf):
+  // voxel n = 64 i + 8 j + k (OpenVDB's order in a leaf) has its centre at
+  // (x[i], y[j], z[k]).
+  static constexpr int kBlockDim = 8;
+  static constexpr int kBlockVoxels = kBlockDim * kBlockDim * kBlockDim;
+  struct BlockCentres {
+    double x[kBlockDim], y[kBlockDim], z[kBlockDim];
+  };
+  // LogProbability of the voxels of a block whose bit is set in `active`
+  // (bit n % 64 of word n / 64): log P into log_p[n] and bit n set in `has`
+  // where the view says something. The same value, bit for bit, as
+  // LogProbability of each centre; cheaper per voxel, as the projection is
+  // summed from per-axis terms.
+  void BlockLogProbability(const BlockCentres& centres, const std::uint64_t active[kBlockDim],
+                           float log_p[kBlockVoxels], std::uint64_t has[kBlockDim]) const;
+
   const CompactDepthView& view() const { return *view_; }
 
  private:
   bool Sample(double u, double v, DepthLabel* label, double* depth, double* confidence) const;
+  // K (R x + t), summed in one fixed order (that of Eigen's 3x3 product with
+  // SSE2) which BlockLogProbability reproduces from per-axis terms.
+  Eigen::Vector3d Project(const Eigen::Vector3d& x) const;
+  // BlockLogProbability voxel by voxel.
+  void BlockByVoxel(const BlockCentres& centres, const std::uint64_t active[kBlockDim], float log_p[kBlockVoxels],
+                    std::uint64_t has[kBlockDim]) const;
+  // LogProbability from the projection h = K (R x + t).
+  bool FromProjection(double h0, double h1, double z, float* log_p, double* c_out) const;
+  // Eqs. 12-13 as log, clamped, for the c of eq. 11 or of free space.
+  float LogPOfC(double c) const;
 
   const CompactDepthView* view_;
   Eigen::Matrix3d P_;  // K R
@@ -113,6 +144,12 @@ class SurfaceEvidence {
   double two_over_s2_;
   double log_clamp_lo_, log_clamp_hi_;
   bool bilinear_;
+  // Per confidence byte (nearest sampling; bilinear confidences are not
+  // bytes): the free-space log P (c = -confidence), and the squared distance
+  // |d_{v,i} - d_i|^2 below which eq. 11's c is so large that log P is
+  // clamped to log(1-ε) (with a margin far above rounding; -1: never).
+  float free_log_p_[256];
+  double clamped_within_sq_[256];
 };
 
 }  // namespace lfrecon
