@@ -27,6 +27,8 @@ void PropagationOptions::Check() const {
   LFRECON_CHECK_OPTION(dt_iterations >= 1 && dt_iterations <= 10);
   LFRECON_CHECK_OPTION(guide_sigma >= 0 && guide_sigma <= 10);
   LFRECON_CHECK_OPTION(min_filtered_confidence >= 0 && min_filtered_confidence < 1);
+  LFRECON_CHECK_OPTION(extrapolation_m0 >= 0);
+  LFRECON_CHECK_OPTION(extrapolation_floor_px > 0);
 }
 
 PropagationOptions PaperPropagationOptions() {
@@ -236,6 +238,8 @@ DepthMap DepthPropagator::Filter(const cv::Mat& image, const SplatMaps& splats) 
   const float min_conf = static_cast<float>(o.min_filtered_confidence);
   // Ridge on the slopes of the affine fit, in (u, v) units (see the options).
   const float ridge = static_cast<float>(std::pow(o.affine_ridge_px / scale, 2));
+  const bool extrap_on = affine && o.extrapolation_m0 > 0;
+  const double floor2 = std::pow(o.extrapolation_floor_px / scale, 2);
   tbb::parallel_for(tbb::blocked_range<int>(0, rows), [&](const tbb::blocked_range<int>& range) {
     for (int r = range.begin(); r != range.end(); ++r) {
       const float* f = data.ptr<float>(r);
@@ -244,7 +248,36 @@ DepthMap DepthPropagator::Filter(const cv::Mat& image, const SplatMaps& splats) 
       std::uint8_t* label = out.label.ptr<std::uint8_t>(r);
       const float vq = V(r);
       for (int c = 0; c < cols; ++c, f += n) {
-        const float cfg = std::max(0.0f, f[affine ? 0 : 1]), cbg = std::max(0.0f, f[bg0 + 1]);
+        float cfg = std::max(0.0f, f[affine ? 0 : 1]);
+        const float cbg = std::max(0.0f, f[bg0 + 1]);
+        // The foreground fit's moments (kAffine), for the extrapolation test and the plane.
+        float mu = 0, mv = 0, mz = 0, suu0 = 0, svv0 = 0, suv = 0, suz = 0, svz = 0;
+        double slope_u = 0, slope_v = 0;
+        if (affine && cfg > min_conf) {
+          const float iw = 1.0f / cfg;
+          mu = f[1] * iw, mv = f[2] * iw, mz = f[6] * iw;
+          suu0 = std::max(0.0f, f[3] * iw - mu * mu);
+          svv0 = std::max(0.0f, f[5] * iw - mv * mv);
+          suv = f[4] * iw - mu * mv;
+          suz = f[7] * iw - mu * mz, svz = f[8] * iw - mv * mz;
+          const float suu = suu0 + ridge, svv = svv0 + ridge;
+          const float det = suu * svv - suv * suv;
+          if (det > 0) {
+            slope_u = (svv * suz - suv * svz) / det;
+            slope_v = (suu * svz - suv * suz) / det;
+          }
+          const double du = U(c) - mu, dv = vq - mv;
+          if (extrap_on && splats.edge_label.at<std::uint8_t>(r, c) != kFg) {
+            // Mahalanobis distance of the pixel from its support's weighted
+            // centroid, the support's spread floored at extrapolation_floor_px
+            // (a line of support is not a zero-width one); pixels with a
+            // foreground depth of their own are exempt.
+            const double eu = suu0 + floor2, ev = svv0 + floor2;
+            const double m2 = (ev * du * du - 2 * suv * du * dv + eu * dv * dv) / std::max(eu * ev - suv * suv, 1e-30);
+            const double excess = std::max(0.0, std::sqrt(std::max(0.0, m2)) - o.extrapolation_m0);
+            cfg *= static_cast<float>(std::exp(-0.5 * excess * excess));
+          }
+        }
         const bool fg = cfg >= cbg;  // the side with the larger filtered confidence
         const float cw = fg ? cfg : cbg;
         if (!(cw > min_conf)) continue;
@@ -261,19 +294,8 @@ DepthMap DepthPropagator::Filter(const cv::Mat& image, const SplatMaps& splats) 
             value = ref[0] + f[0] / cw;
           } else {
             // Confidence-weighted least-squares plane through the filtered
-            // moments, with a ridge on its slopes, evaluated at this pixel.
-            const float iw = 1.0f / cw;
-            const float mu = f[1] * iw, mv = f[2] * iw, mz = f[6] * iw;
-            const float suu = std::max(0.0f, f[3] * iw - mu * mu) + ridge;
-            const float svv = std::max(0.0f, f[5] * iw - mv * mv) + ridge;
-            const float suv = f[4] * iw - mu * mv;
-            const float suz = f[7] * iw - mu * mz, svz = f[8] * iw - mv * mz;
-            const float det = suu * svv - suv * suv;
-            double slope_u = 0, slope_v = 0;
-            if (det > 0) {
-              slope_u = (svv * suz - suv * svz) / det;
-              slope_v = (suu * svz - suv * suz) / det;
-            }
+            // moments, with a ridge on its slopes, evaluated at this pixel
+            // (moments computed above).
             value = ref[0] + mz + slope_u * (U(c) - mu) + slope_v * (vq - mv);
           }
           d = inv ? 1.0 / value : value;

@@ -113,6 +113,13 @@ struct PropagationOptions {
   // Filter inverse depth 1/D instead of D (ours): on a plane 1/D is affine in
   // the pixel coordinates, so averages of it stay on the plane.
   bool filter_inverse_depth = true;
+  // kAffine (ours): a pixel the foreground fit reaches only by extrapolating
+  // beyond its support (a halo beside a silhouette over plain background)
+  // has a large Mahalanobis distance m from the support's weighted centroid
+  // (in units of the support's own spread). The foreground confidence is
+  // multiplied by exp(-max(0, m - m0)² / 2), m0 this value; 0: off.
+  double extrapolation_m0 = 0.0;
+  double extrapolation_floor_px = 2.0;
 
   void Check() const;  // throws OptionError
 };

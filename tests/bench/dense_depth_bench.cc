@@ -5,7 +5,7 @@
 //   dense_depth_bench DATASET [--gt-views N] [--skip K] [--stride S] [--threads T] [--preview-dir DIR] [--cache DIR]
 //                     [--sigma-spatial F] [--sigma-color C] [--guide-sigma S] [--mode nc|ic|rf|own]
 //                     [--iterations N] [--min-confidence C] [--presmooth S] [--max-views N] [--model constant|affine]
-//                     [--ridge PX] [--paper] [--no-depth-confidence] [--no-keep-edge-depths]
+//                     [--ridge PX] [--extrapolation-m0 M] [--extrapolation-floor PX] [--paper] [--no-depth-confidence] [--no-keep-edge-depths]
 //                     [--no-inverse-depth] [--two-sided] [--no-silhouette-splat-only] [--oracle-depth]
 //                     [--upscale F] [--repeat R]
 // Options apply in order: --paper resets to PaperPropagationOptions(), later flags change it.
@@ -62,6 +62,7 @@ int main(int argc, char** argv) {
                  "usage: %s DATASET [--gt-views N] [--skip K] [--stride S] [--threads T] [--preview-dir DIR] [--cache DIR]\n"
                  "       [--sigma-spatial F] [--sigma-color C] [--guide-sigma S] [--mode nc|ic|rf|own] [--iterations N]\n"
                  "       [--min-confidence C] [--presmooth S] [--max-views N] [--model constant|affine] [--ridge PX]\n"
+                 "       [--extrapolation-m0 M] [--extrapolation-floor PX]\n"
                  "       [--paper] [--no-depth-confidence] [--no-keep-edge-depths] [--no-inverse-depth] [--two-sided]\n"
                  "       [--no-silhouette-splat-only] [--oracle-depth] [--upscale F] [--repeat R]\n",
                  argv[0]);
@@ -118,6 +119,8 @@ int main(int argc, char** argv) {
     else if (is("--ncc-texture-min")) popt.consistency.ncc_texture_min = std::atof(argv[++a]);
     else if (!std::strcmp(argv[a], "--no-silhouette-splat-only")) popt.silhouette_pixels_splat_only = false;
     else if (is("--ridge")) popt.affine_ridge_px = std::atof(argv[++a]);
+    else if (is("--extrapolation-m0")) popt.extrapolation_m0 = std::atof(argv[++a]);
+    else if (is("--extrapolation-floor")) popt.extrapolation_floor_px = std::atof(argv[++a]);
     else if (!std::strcmp(argv[a], "--oracle-depth")) oracle = true;
     else {
       std::fprintf(stderr, "unknown argument %s\n", argv[a]);

@@ -289,6 +289,53 @@ TEST(DepthPropagator, FilterReproducesAPlaneFromItsEdgesAndKeepsSidesApart) {
   EXPECT_LE(max_c, 1.0);
 }
 
+TEST(DepthPropagator, ExtrapolationBeyondTheSupportLosesConfidenceAndLinesKeepTheirs) {
+  // A plain frame (nothing stops the filter) and no background support.
+  // Surface: foreground depth on a filled band of columns 20-49. Rod: a
+  // single column (130) of foreground edge pixels with depths of their own.
+  const int rows = 100, cols = 160;
+  const cv::Mat image(rows, cols, CV_32FC3, cv::Scalar(0.4, 0.4, 0.4));
+  SplatMaps band = SplatMaps::Zeros(rows, cols), rod = SplatMaps::Zeros(rows, cols);
+  for (int r = 0; r < rows; ++r) {
+    for (int c = 20; c < 50; ++c) {
+      band.depth_fg.at<float>(r, c) = 0.8f;
+      band.confidence_fg.at<float>(r, c) = 0.8f;
+    }
+    rod.depth_fg.at<float>(r, 130) = 0.9f;
+    rod.confidence_fg.at<float>(r, 130) = 0.8f;
+    rod.edge_label.at<std::uint8_t>(r, 130) = kFg;
+    rod.edge_depth.at<float>(r, 130) = 0.9f;
+  }
+  PropagationOptions off;
+  off.extrapolation_m0 = 0;
+  PropagationOptions on = off;
+  on.extrapolation_m0 = 2;
+  const auto conf = [](const DepthMap& m, int c) { return m.confidence.at<float>(50, c); };
+  {
+    const DepthMap a = DepthPropagator(off).Filter(image, band), b = DepthPropagator(on).Filter(image, band);
+    // Inside the band, away from its ends: unchanged.
+    for (int c = 25; c < 45; ++c) ASSERT_FLOAT_EQ(conf(b, c), conf(a, c)) << c;
+    // 30 px beyond the band's edge the plain filter still says foreground;
+    // the extrapolation test leaves under 5 % of that confidence.
+    ASSERT_EQ(a.label.at<std::uint8_t>(50, 80), kFg);
+    EXPECT_GT(conf(a, 80), 1e-3);
+    EXPECT_LT(conf(b, 80), 0.05 * conf(a, 80));
+    std::printf("30 px beyond the band: confidence %.2e without the test, %.2e with it\n", conf(a, 80), conf(b, 80));
+  }
+  {
+    // The rod's own pixels and their neighbours (within the 2 px floor) keep their confidence and depth.
+    const DepthMap a = DepthPropagator(off).Filter(image, rod), b = DepthPropagator(on).Filter(image, rod);
+    for (int c = 129; c <= 131; ++c) {
+      EXPECT_FLOAT_EQ(conf(b, c), conf(a, c)) << c;
+      EXPECT_FLOAT_EQ(b.depth.at<float>(50, c), a.depth.at<float>(50, c)) << c;
+    }
+  }
+  // A zero floor would divide by a zero spread on a line: refused.
+  PropagationOptions bad = on;
+  bad.extrapolation_floor_px = 0;
+  EXPECT_THROW(bad.Check(), OptionError);
+}
+
 TEST(DepthPropagator, EdgeCasesGiveDefinedOutput) {
   const SynthViews v = testing::MakeSynthViews("sphere", 0, 2.0, 160, 90, 480);
   const auto expect_empty = [](const DepthMap& m, int rows, int cols) {
