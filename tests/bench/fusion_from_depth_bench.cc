@@ -9,17 +9,20 @@
 //   fusion_from_depth_bench DATASET DEPTH_OUT --probability-clamp 0.03 --score 0 [--max-views N] [--keep-mesh DIR]
 //       (the cost of fusion alone with `lfrecon run`'s fusion options: Integrate and ExtractMesh timed per phase,
 //        no scoring; N: every k-th map so that at most N are fused. Under valgrind, count only the fusion with
-//        --toggle-collect='*ProbabilisticFusion::Integrate*' --toggle-collect='*ProbabilisticFusion::ExtractMesh*')
+//        --toggle-collect='*ProbabilisticFusion::Integrate*' --toggle-collect='*ProbabilisticFusion::ExtractMesh*'
+//        and --threads 1: with more threads TBB's split of the work, and so the count, varies from run to run)
 //
 // DEPTH_OUT holds depth/<stem>.pfm and confidence/<stem>.pfm; labels are not
 // stored, so a depth is foreground when its point lies inside V.
 #include <spdlog/spdlog.h>
+#include <tbb/global_control.h>
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <limits>
+#include <memory>
 #include <unordered_map>
 #include <cstdlib>
 #include <filesystem>
@@ -406,7 +409,7 @@ int main(int argc, char** argv) {
                  "  [--refine cp,p,c (carve+Poisson, Poisson, carve+marching cubes)] [--carving-views N] [--consistency T]\n"
                  "  [--min-component-cm2 a,b,...] [--analyze 0|1]\n"
                  "  [--keep-mesh DIR] [--mesh FILE.ply (analyse this mesh only; DEPTH_OUT may be -)]\n"
-                 "  [--score 0 (time fusion only: no scoring)] [--max-views N]\n",
+                 "  [--score 0 (time fusion only: no scoring)] [--max-views N] [--threads N]\n",
                  argv[0]);
     return 2;
   }
@@ -421,7 +424,7 @@ int main(int argc, char** argv) {
   int carving_views = 24;
   std::vector<int> min_views_list = {1};
   bool refine = false, analyze = false, score = true;
-  int max_views = 0;
+  int max_views = 0, threads = 0;
   double consistency = -1;
   double oracle_clean_mm = -1;
   double measured_floor = 0;
@@ -502,6 +505,8 @@ int main(int argc, char** argv) {
       score = std::atoi(v.c_str()) != 0;
     } else if (k == "--max-views") {
       max_views = std::atoi(v.c_str());
+    } else if (k == "--threads") {
+      threads = std::atoi(v.c_str());
     } else if (k == "--analyze") {
       analyze = std::atoi(v.c_str()) != 0;
     } else if (k == "--keep-mesh") {
@@ -513,6 +518,9 @@ int main(int argc, char** argv) {
       return 2;
     }
   }
+  std::unique_ptr<tbb::global_control> thread_limit;
+  if (threads > 0)
+    thread_limit = std::make_unique<tbb::global_control>(tbb::global_control::max_allowed_parallelism, threads);
   DatasetOptions dopt;
   dopt.dataset_dir = dataset_dir;
   const Dataset ds = Dataset::Open(dopt);
