@@ -23,7 +23,10 @@ CompactDepthView::CompactDepthView(const PinholeView& view, const DepthMap& dept
   grid_width_ = cols;
   grid_height_ = rows;
   pixels_.assign(static_cast<std::size_t>(rows) * cols, Pixel{});
-  if (depth.depth.empty()) return;
+  if (depth.depth.empty()) {
+    ComputeTiles();
+    return;
+  }
   CV_Assert(depth.depth.type() == CV_32F && depth.depth.rows == rows && depth.depth.cols == cols);
   const bool has_conf = !depth.confidence.empty();
   const bool has_label = !depth.label.empty();
@@ -42,6 +45,7 @@ CompactDepthView::CompactDepthView(const PinholeView& view, const DepthMap& dept
   }
   if (far_ <= 0) {  // V is behind the camera: this view says nothing
     near_ = far_ = 0;
+    ComputeTiles();
     return;
   }
   near_ = std::max(near_, 1e-6);
@@ -86,6 +90,19 @@ CompactDepthView::CompactDepthView(const PinholeView& view, const DepthMap& dept
       if (p.confidence == 0) p = Pixel{};
     }
   }
+  ComputeTiles();
+}
+
+void CompactDepthView::ComputeTiles() {
+  tiles_wide_ = (grid_width_ + kTile - 1) / kTile;
+  const int tiles_high = (grid_height_ + kTile - 1) / kTile;
+  tile_max_.assign(static_cast<std::size_t>(tiles_wide_) * tiles_high, 0);
+  if (pixels_.empty()) return;
+  for (int r = 0; r < grid_height_; ++r)
+    for (int c = 0; c < grid_width_; ++c) {
+      std::uint16_t& t = tile_max_[static_cast<std::size_t>(r / kTile) * tiles_wide_ + c / kTile];
+      t = std::max(t, at(r, c).depth);
+    }
 }
 
 int CompactDepthView::CountForeground() const {
@@ -104,7 +121,10 @@ CompactDepthView CompactDepthView::Coarsened(double band) const {
   out.grid_width_ = (grid_width_ + 1) / 2;
   out.grid_height_ = (grid_height_ + 1) / 2;
   out.pixels_.assign(static_cast<std::size_t>(out.grid_width_) * out.grid_height_, Pixel{});
-  if (pixels_.empty()) return out;
+  if (pixels_.empty()) {
+    out.ComputeTiles();
+    return out;
+  }
   const double band_codes = step_ > 0 ? band / step_ : 0;
   const auto fg = static_cast<std::uint8_t>(DepthLabel::kForeground);
   const auto bg = static_cast<std::uint8_t>(DepthLabel::kBackground);
@@ -152,6 +172,7 @@ CompactDepthView CompactDepthView::Coarsened(double band) const {
       if (q.confidence == 0) q = Pixel{};
     }
   }
+  out.ComputeTiles();
   return out;
 }
 
@@ -322,11 +343,15 @@ void SurfaceEvidence::BlockLogProbability(const BlockCentres& centres, const std
   }
   if (count == 0) return;
   if (count >= 8) {
-    // The block's 8 corner voxels: when all lie beyond one image border
-    // (1 px margin) and in front of the camera, so does every voxel (their
-    // projections are in the corners' convex hull): none is seen.
+    // The block's 8 corner voxels. Every voxel's projection lies in their
+    // convex hull when all are in front of the camera, and its depth is at
+    // least theirs: when all lie beyond one image border (1 px margin), or
+    // behind every depth (plus the band) of the pixels around their
+    // projections, no voxel is seen.
     bool left = true, right = true, top = true, bottom = true;
-    for (int q = 0; q < 8 && (left || right || top || bottom); ++q) {
+    double z_min = std::numeric_limits<double>::infinity(), u_min = z_min, v_min = z_min, u_max = -z_min,
+           v_max = -z_min;
+    for (int q = 0; q < 8; ++q) {
       const int i = (q & 1) * (D - 1), j = ((q >> 1) & 1) * (D - 1), k = ((q >> 2) & 1) * (D - 1);
       const Eigen::Vector3d h = Project(Eigen::Vector3d(centres.x[i], centres.y[j], centres.z[k]));
       if (!(h.z() > 1e-9)) return BlockByVoxel(centres, active, log_p, has);  // straddles the camera plane
@@ -335,8 +360,35 @@ void SurfaceEvidence::BlockLogProbability(const BlockCentres& centres, const std
       right &= u > view_->width() + 1;
       top &= v < -1;
       bottom &= v > view_->height() + 1;
+      z_min = std::min(z_min, h.z());
+      u_min = std::min(u_min, u);
+      u_max = std::max(u_max, u);
+      v_min = std::min(v_min, v);
+      v_max = std::max(v_max, v);
     }
     if (left || right || top || bottom) return;
+    if (!bilinear_ && view_->HasTiles()) {  // bilinear depths may lie up to a band behind the nearest pixel's
+      const CompactDepthView& m = *view_;
+      const double b = m.block();  // stored pixel = floor(u / block), as in FromProjection
+      // The stored pixels under [lo, hi] (+-0.01 px for rounding), clamped to [-1, n] before the cast.
+      const auto cell = [](double x, int n) { return static_cast<int>(std::clamp(std::floor(x), -1.0, double(n))); };
+      const int c0 = std::max(0, cell(u_min / b - 0.01, m.grid_width()));
+      const int c1 = std::min(m.grid_width() - 1, cell(u_max / b + 0.01, m.grid_width()));
+      const int r0 = std::max(0, cell(v_min / b - 0.01, m.grid_height()));
+      const int r1 = std::min(m.grid_height() - 1, cell(v_max / b + 0.01, m.grid_height()));
+      if (c0 > c1 || r0 > r1) return;
+      std::uint16_t code = 0;
+      for (int tr = r0 / CompactDepthView::kTile; tr <= r1 / CompactDepthView::kTile; ++tr)
+        for (int tc = c0 / CompactDepthView::kTile; tc <= c1 / CompactDepthView::kTile; ++tc)
+          code = std::max(code, m.TileMaxCode(tr, tc));
+      if (code == 0) return;  // no pixel there has a depth
+      if (code != CompactDepthView::kBeyond) {
+        CompactDepthView::Pixel p;
+        p.depth = code;
+        const double d_max = m.Depth(p);
+        if (z_min > d_max + band_ + 1e-9 * (1.0 + d_max)) return;  // every voxel occluded
+      }
+    }
   }
   // Sparse block: the per-axis terms would cost more than they save.
   if (count < 24) return BlockByVoxel(centres, active, log_p, has);

@@ -65,7 +65,19 @@ class CompactDepthView {
   static DepthLabel Label(const Pixel& p) { return static_cast<DepthLabel>(p.label); }
 
   int CountForeground() const;  // stored pixels (blocks when coarsened)
-  std::size_t MemoryBytes() const { return pixels_.capacity() * sizeof(Pixel) + sizeof(*this); }
+  std::size_t MemoryBytes() const {
+    return pixels_.capacity() * sizeof(Pixel) + tile_max_.capacity() * sizeof(std::uint16_t) + sizeof(*this);
+  }
+
+  // The stored grid in tiles of kTile x kTile: per tile the largest depth
+  // code of its pixels (0: none has a depth; kBeyond: some background lies
+  // beyond V). A voxel farther than that depth plus the band is occluded
+  // wherever it projects into the tile (SurfaceEvidence skips such blocks).
+  static constexpr int kTile = 8;
+  std::uint16_t TileMaxCode(int tile_row, int tile_col) const {
+    return tile_max_[static_cast<std::size_t>(tile_row) * tiles_wide_ + tile_col];
+  }
+  bool HasTiles() const { return !tile_max_.empty(); }
 
   // The same view with blocks of 2x2 stored pixels merged into one (block()
   // doubles, memory / 4), for the store's memory budget. A merged block is
@@ -88,6 +100,9 @@ class CompactDepthView {
   double near_ = 0, far_ = 0, step_ = 0;
   int block_ = 1, grid_width_ = 0, grid_height_ = 0;
   std::vector<Pixel> pixels_;
+  int tiles_wide_ = 0;
+  std::vector<std::uint16_t> tile_max_;
+  void ComputeTiles();
 };
 
 // Precomputed per view: the projection rows and option constants.

@@ -131,9 +131,12 @@ TEST(SurfaceEvidence, LogProbabilityMatchesThePlainFormulasBitForBit) {
 }
 
 TEST(SurfaceEvidence, BlockLogProbabilityMatchesLogProbabilityPerVoxel) {
-  // Blocks across the image border and around the foreground depths, in a
-  // view and in its coarsened copy.
-  const Rig rig(3);
+  // Blocks across the image border, around the foreground depths and behind
+  // them (occluded: skipped whole), in a view and in its coarsened copy.
+  Rig rig(3);
+  // A far foreground patch, so that blocks behind the near depths are seen there.
+  for (int r = 20; r < 30; ++r)
+    for (int c = 30; c < 45; ++c) rig.depth.depth.at<float>(r, c) = 1.15f;
   const FusionOptions fo = Options(rig.volume, 0.03);
   for (int coarsen = 0; coarsen <= 1; ++coarsen) {
   CompactDepthView cv(rig.view, rig.depth, rig.volume);
@@ -143,8 +146,8 @@ TEST(SurfaceEvidence, BlockLogProbabilityMatchesLogProbabilityPerVoxel) {
   const double s = fo.voxel_size;
   int voxels_with_evidence = 0;
   for (int trial = 0; trial < 1000; ++trial) {
-    // A leaf around the foreground depth (y ~ 0: depth ~1 from the camera at y = -1).
-    const Eigen::Vector3i origin(static_cast<int>(rng() % 118), 50 + static_cast<int>(rng() % 24),
+    // A leaf around or behind the foreground depth (y ~ 0: depth ~1 from the camera at y = -1).
+    const Eigen::Vector3i origin(static_cast<int>(rng() % 118), 50 + static_cast<int>(rng() % 68),
                                  static_cast<int>(rng() % 118));
     SurfaceEvidence::BlockCentres centres;
     for (int t = 0; t < SurfaceEvidence::kBlockDim; ++t) {
