@@ -272,35 +272,41 @@ bool SurfaceEvidence::LogProbability(const Eigen::Vector3d& x, float* log_p, dou
   return FromProjection(h.x(), h.y(), h.z(), log_p, c_out);
 }
 
-bool SurfaceEvidence::FromProjection(double h0, double h1, double z, float* log_p, double* c_out) const {
+// FromProjection for nearest sampling without c: Sample and the formulas of
+// the general path, with the per-byte tables (inline: the block loop's body).
+inline bool SurfaceEvidence::NearestLogP(double h0, double h1, double z, float* log_p) const {
   if (!(z > 1e-9)) return false;
   double u = h0 / z, v = h1 / z;
   if (!(u >= 0 && v >= 0 && u < view_->width() && v < view_->height())) return false;
-  if (!bilinear_ && !c_out) {
-    // Nearest sampling: Sample and the formulas below with the per-byte tables.
-    const CompactDepthView& m = *view_;
-    if (m.block() > 1) {
-      u /= m.block();
-      v /= m.block();
-    }
-    const CompactDepthView::Pixel& p = m.at(static_cast<int>(v), static_cast<int>(u));
-    if (p.depth == 0 || p.confidence == 0) return false;
-    if (CompactDepthView::Label(p) == DepthLabel::kForeground) {
-      const double delta = z - m.Depth(p);
-      if (delta > band_) return false;
-      if (carve_front_ && delta < -margin_) {
-        *log_p = free_log_p_[p.confidence];
-      } else if (delta * delta <= clamped_within_sq_[p.confidence]) {
-        *log_p = static_cast<float>(log_clamp_hi_);
-      } else {
-        *log_p = LogPOfC(CompactDepthView::Confidence(p) * std::exp(-delta * delta / (2.0 * sigma_v_ * sigma_v_)));
-      }
-    } else {
-      if (z > m.Depth(p)) return false;
-      *log_p = free_log_p_[p.confidence];
-    }
-    return true;
+  const CompactDepthView& m = *view_;
+  if (m.block() > 1) {
+    u /= m.block();
+    v /= m.block();
   }
+  const CompactDepthView::Pixel& p = m.at(static_cast<int>(v), static_cast<int>(u));
+  if (p.depth == 0 || p.confidence == 0) return false;
+  if (CompactDepthView::Label(p) == DepthLabel::kForeground) {
+    const double delta = z - m.Depth(p);
+    if (delta > band_) return false;
+    if (carve_front_ && delta < -margin_) {
+      *log_p = free_log_p_[p.confidence];
+    } else if (delta * delta <= clamped_within_sq_[p.confidence]) {
+      *log_p = static_cast<float>(log_clamp_hi_);
+    } else {
+      *log_p = LogPOfC(CompactDepthView::Confidence(p) * std::exp(-delta * delta / (2.0 * sigma_v_ * sigma_v_)));
+    }
+  } else {
+    if (z > m.Depth(p)) return false;
+    *log_p = free_log_p_[p.confidence];
+  }
+  return true;
+}
+
+bool SurfaceEvidence::FromProjection(double h0, double h1, double z, float* log_p, double* c_out) const {
+  if (!bilinear_ && !c_out) return NearestLogP(h0, h1, z, log_p);
+  if (!(z > 1e-9)) return false;
+  const double u = h0 / z, v = h1 / z;
+  if (!(u >= 0 && v >= 0 && u < view_->width() && v < view_->height())) return false;
   DepthLabel label;
   double d, conf;
   if (!Sample(u, v, &label, &d, &conf)) return false;
@@ -418,7 +424,9 @@ void SurfaceEvidence::BlockLogProbability(const BlockCentres& centres, const std
       const double h0 = (ab0[j] + cc[0][k]) + p0;
       const double h1 = (ab1[j] + cc[1][k]) + p1;
       const double h2 = (a[2][i] + bc2[j][k]) + p2;
-      if (FromProjection(h0, h1, h2, &log_p[i * 64 + b], nullptr)) has[i] |= std::uint64_t{1} << b;
+      float* out = &log_p[i * 64 + b];
+      if (bilinear_ ? FromProjection(h0, h1, h2, out, nullptr) : NearestLogP(h0, h1, h2, out))
+        has[i] |= std::uint64_t{1} << b;
     }
   }
 }

@@ -148,6 +148,7 @@ class SurfaceEvidence {
                     std::uint64_t has[kBlockDim]) const;
   // LogProbability from the projection h = K (R x + t).
   bool FromProjection(double h0, double h1, double z, float* log_p, double* c_out) const;
+  bool NearestLogP(double h0, double h1, double z, float* log_p) const;
   // Eqs. 12-13 as log, clamped, for the c of eq. 11 or of free space.
   float LogPOfC(double c) const;
 
