@@ -45,6 +45,14 @@ void InitOpenVdb() {
   std::call_once(once, [] { openvdb::initialize(); });
 }
 
+// static_cast<int>(std::floor(x)) for |x| < 2^31, without floor(): the
+// build targets baseline x86-64, where floor is a long instruction sequence
+// (no SSE4.1 roundsd).
+inline int FloorToInt(double x) {
+  const int t = static_cast<int>(x);  // towards zero
+  return t - (x < t);
+}
+
 Coord CornerOffset(int k) { return Coord(k & 1, (k >> 1) & 1, (k >> 2) & 1); }
 
 // 21 + 21 + 20 bits of voxel index (all >= 0, < 2^20) and 2 bits of axis.
@@ -142,8 +150,7 @@ openvdb::MaskTree ProbabilisticFusion::Impl::Activate(const CompactDepthView& cv
             for (int m = 0; m <= n; ++m) {
               const double z = z0 + (z1 - z0) * m / n;
               const Eigen::Vector3d g = (center + z * w - vmin) / s;
-              const Coord ijk(static_cast<int>(std::floor(g.x())), static_cast<int>(std::floor(g.y())),
-                              static_cast<int>(std::floor(g.z())));
+              const Coord ijk(FloorToInt(g.x()), FloorToInt(g.y()), FloorToInt(g.z()));
               if (ijk == last) continue;
               last = ijk;
               if (ijk.x() < 0 || ijk.y() < 0 || ijk.z() < 0 || ijk.x() >= nx || ijk.y() >= ny || ijk.z() >= nz) continue;
