@@ -80,6 +80,7 @@ class DaemonProcess {
     return -2;
   }
   bool Running() { return pid_ > 0 && !Reaped(); }
+  pid_t pid() const { return pid_; }  // -1 once reaped
   const std::filesystem::path& log() const { return log_; }
   std::string Log() const {
     std::ifstream f(log_);

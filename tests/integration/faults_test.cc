@@ -7,11 +7,15 @@
 #include <sys/mount.h>
 #include <sys/wait.h>
 #include <unistd.h>
+#include <zlib.h>
 
 #include <gtest/gtest.h>
+#include <opencv2/imgcodecs.hpp>
 
+#include <algorithm>
 #include <atomic>
 #include <chrono>
+#include <cstdint>
 #include <cstdio>
 #include <cstdlib>
 #include <fstream>
@@ -19,6 +23,7 @@
 #include <optional>
 #include <sstream>
 #include <thread>
+#include <vector>
 
 #include "common/auth.h"
 #include "common/job_store.h"
@@ -49,6 +54,44 @@ int TempFiles(const fs::path& dir) {
   for (const auto& e : fs::recursive_directory_iterator(dir, ec))
     n += e.path().filename().string().find(".tmp") != std::string::npos;
   return n;
+}
+
+// A valid PNG of `width` x `height` 1-bit grey pixels, all black: deflate
+// makes it small however large it is (20000x20000: 50 MB of rows, a 49 KB file).
+std::string BlackPng(std::uint32_t width, std::uint32_t height) {
+  auto be32 = [](std::uint32_t v) {
+    return std::string{static_cast<char>(v >> 24), static_cast<char>(v >> 16), static_cast<char>(v >> 8),
+                       static_cast<char>(v)};
+  };
+  auto chunk = [&](const std::string& type, const std::string& data) {
+    const std::string body = type + data;
+    const auto crc = static_cast<std::uint32_t>(
+        ::crc32(0, reinterpret_cast<const Bytef*>(body.data()), static_cast<uInt>(body.size())));
+    return be32(static_cast<std::uint32_t>(data.size())) + body + be32(crc);
+  };
+  const std::string ihdr = be32(width) + be32(height) + std::string("\x01\x00\x00\x00\x00", 5);  // 1 bit, grey
+  const std::string rows(static_cast<std::size_t>(height) * (1 + (width + 7) / 8), '\0');  // filter 0, zeros
+  uLongf size = ::compressBound(rows.size());
+  std::string z(size, '\0');
+  EXPECT_EQ(::compress2(reinterpret_cast<Bytef*>(z.data()), &size, reinterpret_cast<const Bytef*>(rows.data()),
+                        rows.size(), 1),
+            Z_OK);
+  z.resize(size);
+  return std::string("\x89PNG\r\n\x1a\n", 8) + chunk("IHDR", ihdr) + chunk("IDAT", z) + chunk("IEND", "");
+}
+
+// Process `pid`'s memory figure `field` ("VmHWM:" the peak resident, "VmRSS:"
+// the resident now) in bytes; -1 if it cannot be read.
+long MemoryBytes(pid_t pid, const std::string& field) {
+  std::ifstream in("/proc/" + std::to_string(pid) + "/status");
+  std::string line;
+  while (std::getline(in, line))
+    if (line.rfind(field, 0) == 0) return std::stol(line.substr(field.size())) * 1024;
+  return -1;
+}
+// Resets process `pid`'s VmHWM to its resident memory now; false where Linux does not allow it.
+bool ResetPeakRss(pid_t pid) {
+  return static_cast<bool>(std::ofstream("/proc/" + std::to_string(pid) + "/clear_refs") << "5");
 }
 
 class FaultsTest : public ::testing::Test {
@@ -117,6 +160,50 @@ class FaultsTest : public ::testing::Test {
     out.erase(out.find_last_not_of("\n") + 1);
     EXPECT_TRUE(JobStore::ValidJobId(out)) << out;
     return out;
+  }
+  // A copy of the shared dataset whose frame `k` is replaced by file `name`
+  // holding `bytes` (the COLMAP model renamed to it); the copy's folder.
+  fs::path DatasetWithFrame(const std::string& tag, int k, const std::string& name, const std::string& bytes) {
+    const fs::path ds = tmp_->path() / tag;
+    fs::copy(g_ref.dataset, ds, fs::copy_options::recursive);
+    std::vector<fs::path> images;
+    for (const auto& e : fs::directory_iterator(ds / "images")) images.push_back(e.path());
+    std::sort(images.begin(), images.end());
+    const std::string old_name = images.at(k).filename().string();
+    fs::remove(images.at(k));
+    std::ofstream(ds / "images" / name, std::ios::binary) << bytes;
+    std::string model = ReadFileBytes(ds / "sparse" / "images.txt");
+    const auto at = model.find(" " + old_name + "\n");
+    EXPECT_NE(at, std::string::npos) << old_name;
+    if (at != std::string::npos) model.replace(at + 1, old_name.size(), name);
+    std::ofstream(ds / "sparse" / "images.txt", std::ios::binary | std::ios::trunc) << model;
+    return ds;
+  }
+  // `lfrecon submit` of dataset `ds`; the job id ("" when refused).
+  std::string SubmitDataset(const fs::path& ds) {
+    const auto r = lfrecon::testing::RunShell(kBin + "lfrecon -q submit --ingest " + ing_ + " --dataset " +
+                                              ds.string() + " --voxel-mm 8");
+    EXPECT_EQ(r.code, 0) << r.output;
+    std::string job = r.output;
+    job.erase(job.find_last_not_of("\n") + 1);
+    job.erase(0, job.find_last_of('\n') + 1);  // the last line
+    EXPECT_TRUE(JobStore::ValidJobId(job)) << r.output;
+    return r.code == 0 ? job : "";
+  }
+  // Both daemons alive and a good job taken: spooled whole and handed to the
+  // aggregator (no workers run: it waits there, RUNNING).
+  void ExpectStillServing(DaemonProcess* agg, DaemonProcess* ing) {
+    EXPECT_TRUE(agg->Running());
+    EXPECT_TRUE(ing->Running());
+    const std::string good = Submit();
+    pb::JobStatus s;
+    EXPECT_TRUE(WaitFor(
+        good,
+        [](const pb::JobStatus& st) {
+          return st.state() == pb::STATE_RUNNING && st.frames_spooled() == static_cast<unsigned>(g_ref.views);
+        },
+        60, &s))
+        << pb::JobState_Name(s.state()) << ", " << s.frames_spooled() << " frames spooled: " << s.message();
   }
   pb::JobStatus Status(const std::string& job) {
     pb::Envelope req = NewEnvelope(job);
@@ -827,6 +914,59 @@ TEST_F(FaultsTest, BoundsRefuseRequestsBeyondThem) {
     waiting.join();
   }
   EXPECT_TRUE(busy_seen);
+}
+
+// One frame among the 96x54 ones is a valid 20000x20000 PNG: it was decoded
+// before its size was checked (6.8 GB peak). Ingest checks its header against
+// its camera before decoding: the job fails at once naming the file, the
+// daemons keep serving, and ingest's peak memory stays small (decoding the
+// frame takes 400 MB as 8-bit grey, 4.8 GB as float BGR).
+TEST_F(FaultsTest, HugeFrameFailsTheJobFromItsHeader) {
+  DaemonProcess* agg = StartAggregator();
+  DaemonProcess* ing = StartIngest();
+  const std::string name = "00005_huge.png";
+  const fs::path ds = DatasetWithFrame("huge", 5, name, BlackPng(20000, 20000));
+  // The peak from now on (ASan's larger baseline left out), else since ingest started.
+  const long base = ResetPeakRss(ing->pid()) ? MemoryBytes(ing->pid(), "VmRSS:") : 0;
+  const auto t0 = std::chrono::steady_clock::now();
+  const std::string job = SubmitDataset(ds);
+  ASSERT_FALSE(job.empty());
+  const pb::JobStatus s = WaitEnded(job, 30);
+  std::printf("job ended %s in %.2f s: %s\n", pb::JobState_Name(s.state()).c_str(),
+              std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count(), s.message().c_str());
+  EXPECT_EQ(s.state(), pb::STATE_FAILED);
+  for (const std::string& needle : {name, std::string("header"), std::string("20000x20000"), std::string("96x54")})
+    EXPECT_NE(s.message().find(needle), std::string::npos) << needle << " not in: " << s.message();
+  EXPECT_LE(s.frames_spooled(), 5u);
+  const long peak = MemoryBytes(ing->pid(), "VmHWM:");
+  std::printf("ingest's peak resident memory %.1f MB, %.1f MB over its %s\n", peak / 1e6, (peak - base) / 1e6,
+              base > 0 ? "resident memory at submit" : "start");
+  EXPECT_GT(peak, 0);
+  EXPECT_LT(peak - base, 300l << 20);
+  ExpectStillServing(agg, ing);
+}
+
+// A JPEG cut to half its bytes was decoded half grey, silently, and the job
+// wrote a mesh. The policy (io/frame_source.h ReadImageFloat): a JPEG without
+// its end-of-image marker is an error naming the file; the job fails with it,
+// the daemons keep serving.
+TEST_F(FaultsTest, TruncatedJpegFailsTheJobNamingTheFile) {
+  DaemonProcess* agg = StartAggregator();
+  DaemonProcess* ing = StartIngest();
+  const cv::Mat frame = cv::imread((g_ref.dataset / "images" / "00007.png").string(), cv::IMREAD_COLOR);
+  ASSERT_FALSE(frame.empty());
+  std::vector<unsigned char> jpeg;
+  ASSERT_TRUE(cv::imencode(".jpg", frame, jpeg, {cv::IMWRITE_JPEG_QUALITY, 95}));
+  const std::string name = "00007.jpg";
+  const fs::path ds = DatasetWithFrame("half", 7, name, std::string(jpeg.begin(), jpeg.begin() + jpeg.size() / 2));
+  const std::string job = SubmitDataset(ds);
+  ASSERT_FALSE(job.empty());
+  const pb::JobStatus s = WaitEnded(job, 30);
+  EXPECT_EQ(s.state(), pb::STATE_FAILED);
+  EXPECT_NE(s.message().find(name), std::string::npos) << s.message();
+  EXPECT_NE(s.message().find("truncated"), std::string::npos) << s.message();
+  EXPECT_LE(s.frames_spooled(), 7u);
+  ExpectStillServing(agg, ing);
 }
 
 }  // namespace
