@@ -131,8 +131,10 @@ fs::path WriteReportHtml(const fs::path& out, const ReportHtmlOptions& o) {
   h << "<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\"><title>lfrecon report: "
     << Escape(out.filename().string()) << "</title>\n<style>body{font-family:sans-serif;margin:2em;max-width:70em}"
     << "table{border-collapse:collapse}td,th{border:1px solid #bbb;padding:.2em .6em;text-align:right}"
-    << "th:first-child,td:first-child{text-align:left}figure{display:inline-block;margin:.5em;vertical-align:top}"
-    << ".view{display:inline-block;vertical-align:top}"
+    << "th:first-child,td:first-child{text-align:left}figure{display:inline-table;margin:.5em;vertical-align:top}"
+    // A caption wraps within its image's width, so a view's depth and edges stay side by side.
+    << "figcaption{display:table-caption;caption-side:bottom}"
+    << ".view{display:flex;flex-wrap:wrap;align-items:flex-start}"
     << "img{max-width:100%;border:1px solid #ddd}</style></head><body>\n";
   h << "<h1>lfrecon report</h1>\n<p>Run folder <code>" << Escape(fs::absolute(out).string()) << "</code>";
   if (report.contains("views"))
