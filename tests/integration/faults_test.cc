@@ -918,12 +918,13 @@ TEST_F(FaultsTest, BoundsRefuseRequestsBeyondThem) {
 
 // One frame among the 96x54 ones is a valid 20000x20000 PNG: it was decoded
 // before its size was checked (6.8 GB peak). Ingest checks its header against
-// its camera before decoding: the job fails at once naming the file, the
-// daemons keep serving, and ingest's peak memory stays small (decoding the
-// frame takes 400 MB as 8-bit grey, 4.8 GB as float BGR).
+// its camera before decoding: the job fails at once naming the file (a
+// stream of it is refused at that frame), the daemons keep serving, and
+// ingest's peak memory stays small (decoding the frame takes 400 MB as 8-bit
+// grey, 4.8 GB as float BGR).
 TEST_F(FaultsTest, HugeFrameFailsTheJobFromItsHeader) {
   DaemonProcess* agg = StartAggregator();
-  DaemonProcess* ing = StartIngest();
+  DaemonProcess* ing = StartIngest({"--stream-timeout-s", "2"});
   const std::string name = "00005_huge.png";
   const fs::path ds = DatasetWithFrame("huge", 5, name, BlackPng(20000, 20000));
   // The peak from now on (ASan's larger baseline left out), else since ingest started.
@@ -938,6 +939,23 @@ TEST_F(FaultsTest, HugeFrameFailsTheJobFromItsHeader) {
   for (const std::string& needle : {name, std::string("header"), std::string("20000x20000"), std::string("96x54")})
     EXPECT_NE(s.message().find(needle), std::string::npos) << needle << " not in: " << s.message();
   EXPECT_LE(s.frames_spooled(), 5u);
+  // Streamed, the frame is refused as it arrives, checked as on the submit
+  // path: lfrecon stream stops with the error, and the stream, its client
+  // gone, fails after --stream-timeout-s.
+  const auto streamed = lfrecon::testing::RunShell(kBin + "lfrecon -q stream --ingest " + ing_ + " --aggregate " + agg_ +
+                                                   " --dataset " + ds.string() + " --voxel-mm 8");
+  EXPECT_EQ(streamed.code, 1) << streamed.output;
+  for (const std::string& needle : {std::string("frame 5"), std::string("20000x20000"), std::string("96x54")})
+    EXPECT_NE(streamed.output.find(needle), std::string::npos) << needle << " not in: " << streamed.output;
+  std::string stream_job;
+  std::istringstream lines(streamed.output);
+  for (std::string line; std::getline(lines, line) && stream_job.empty();)
+    if (JobStore::ValidJobId(line)) stream_job = line;
+  ASSERT_FALSE(stream_job.empty()) << streamed.output;
+  const pb::JobStatus ss = WaitEnded(stream_job, 30);
+  EXPECT_EQ(ss.state(), pb::STATE_FAILED);
+  EXPECT_NE(ss.message().find("client gone"), std::string::npos) << ss.message();
+  EXPECT_LT(ss.frames_spooled(), static_cast<unsigned>(g_ref.views));  // 0-4, and any pushed after 5 before the error
   const long peak = MemoryBytes(ing->pid(), "VmHWM:");
   std::printf("ingest's peak resident memory %.1f MB, %.1f MB over its %s\n", peak / 1e6, (peak - base) / 1e6,
               base > 0 ? "resident memory at submit" : "start");
