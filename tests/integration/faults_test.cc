@@ -960,7 +960,14 @@ TEST_F(FaultsTest, HugeFrameFailsTheJobFromItsHeader) {
   std::printf("ingest's peak resident memory %.1f MB, %.1f MB over its %s\n", peak / 1e6, (peak - base) / 1e6,
               base > 0 ? "resident memory at submit" : "start");
   EXPECT_GT(peak, 0);
+#ifndef __SANITIZE_ADDRESS__
   EXPECT_LT(peak - base, 300l << 20);
+#else
+  // Under ASan the daemon's freed blocks wait in its quarantine (256 MB by
+  // default) and shadow memory adds to the resident figure: the bound would
+  // measure ASan, not the decode. The refusal itself is asserted above.
+  std::printf("(ASan build: the peak memory bound is not asserted)\n");
+#endif
   ExpectStillServing(agg, ing);
 }
 
