@@ -151,7 +151,8 @@ ColmapPosesSummary EstimatePosesWithColmap(const ColmapPosesOptions& options) {
                             "; install Debian's colmap package (apt-get install colmap, or deploy/install_deps.sh) "
                             "or pass --colmap PATH");
   }
-  const fs::path out = options.out_dir;
+  // Absolute: COLMAP runs in OUT/colmap, where a relative --out would not resolve.
+  const fs::path out = fs::absolute(options.out_dir);
   const fs::path images = out / "images";
   const fs::path ws = out / "colmap";
   fs::create_directories(images);

@@ -87,6 +87,42 @@ TEST(ColmapPoses, FailingStepNamesBinaryStatusAndStderr) {
   EXPECT_NE(m.find("Check failed: camera model (feature_extractor)"), std::string::npos) << m;
 }
 
+// A relative --out, as a user types it: COLMAP runs in OUT/colmap, so the
+// paths it is given must be absolute (they were relative, and COLMAP refused
+// the database path). The stand-in says which it got.
+TEST(ColmapPoses, RelativeOutputFolderReachesColmapAsAbsolutePaths) {
+  TempDir dir;
+  const fs::path fake = dir.path() / "fake-colmap";
+  {
+    std::ofstream f(fake);
+    f << "#!/bin/sh\nprev=\n"
+         "for a in \"$@\"; do\n"
+         "  if [ \"$prev\" = --database_path ]; then\n"
+         "    case \"$a\" in /*) echo \"absolute database path\" >&2; exit 4;; esac\n"
+         "    echo \"relative database path $a\" >&2; exit 5\n"
+         "  fi\n"
+         "  prev=$a\n"
+         "done\nexit 6\n";
+  }
+  fs::permissions(fake, fs::perms::owner_all);
+  fs::create_directories(dir.path() / "in");
+  for (int i = 0; i < 4; ++i) {
+    const cv::Mat img(16, 16, CV_8UC3, cv::Scalar(i, i, i));
+    cv::imwrite((dir.path() / "in" / ("f" + std::to_string(i) + ".png")).string(), img);
+  }
+  ColmapPosesOptions o;
+  o.images_dir = "in";
+  o.out_dir = "out";
+  o.colmap = fake.string();
+  const fs::path cwd = fs::current_path();
+  fs::current_path(dir.path());
+  const std::string m = Message([&] { EstimatePosesWithColmap(o); });
+  fs::current_path(cwd);
+  EXPECT_NE(m.find("absolute database path"), std::string::npos) << m;
+  EXPECT_NE(m.find("exit status 4"), std::string::npos) << m;
+  EXPECT_TRUE(fs::is_directory(dir.path() / "out" / "colmap" / "logs")) << "OUT resolved against the caller's folder";
+}
+
 TEST(ColmapPoses, OptionsAreChecked) {
   ColmapPosesOptions o;
   o.out_dir = "/tmp/x";
