@@ -171,7 +171,8 @@ void ProbabilisticFusion::Impl::BackFill(const openvdb::MaskTree& fresh, std::si
   fresh.getNodes(mask_leaves);
   std::vector<SurfaceEvidence> evidence;
   evidence.reserve(num_previous);
-  for (std::size_t i = 0; i < num_previous; ++i) evidence.emplace_back(*views[i], options);
+  evidence.emplace_back(*views[0], options);
+  for (std::size_t i = 1; i < num_previous; ++i) evidence.emplace_back(*views[i], evidence.front());  // tables shared
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, mask_leaves.size()), [&](const auto& range) {
     std::uint64_t active[SurfaceEvidence::kBlockDim], has[SurfaceEvidence::kBlockDim];
     float lp[SurfaceEvidence::kBlockVoxels];

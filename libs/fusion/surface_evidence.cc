@@ -205,6 +205,12 @@ SurfaceEvidence::SurfaceEvidence(const CompactDepthView& view, const FusionOptio
   }
 }
 
+SurfaceEvidence::SurfaceEvidence(const CompactDepthView& view, const SurfaceEvidence& other) : SurfaceEvidence(other) {
+  view_ = &view;
+  P_ = view.view().K * view.view().R;  // as in the constructor from options
+  p_ = view.view().K * view.view().t;
+}
+
 float SurfaceEvidence::LogPOfC(double c) const {
   // Eqs. 12-13: log(1 / (1 + exp(-2c/σ_s^2))), computed stably, then clamped.
   const double a = -two_over_s2_ * c;

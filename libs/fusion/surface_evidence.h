@@ -109,6 +109,10 @@ class CompactDepthView {
 class SurfaceEvidence {
  public:
   SurfaceEvidence(const CompactDepthView& view, const FusionOptions& options);
+  // For `view` with the options of `other`, whose tables it copies instead of
+  // recomputing them (~500 exp/log each: back-fill builds one per stored view
+  // for every integrated view).
+  SurfaceEvidence(const CompactDepthView& view, const SurfaceEvidence& other);
 
   // log P_i(v ∈ S | c_{v,i}) for the world point x (a voxel centre). Returns
   // false when view i says nothing about x: x is behind the camera or outside

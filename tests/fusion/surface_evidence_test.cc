@@ -130,6 +130,31 @@ TEST(SurfaceEvidence, LogProbabilityMatchesThePlainFormulasBitForBit) {
   }
 }
 
+TEST(SurfaceEvidence, CopiedTablesGiveTheSameEvidence) {
+  // Back-fill builds each view's evidence from another view's tables.
+  const Rig rig(9);
+  const PinholeView other_view = testing::LookAtView({0.3, -1, 0.2}, {0, 0, 0}, 64, 48, 40);
+  const FusionOptions fo = Options(rig.volume, 0.03);
+  const CompactDepthView cv(rig.view, rig.depth, rig.volume);
+  DepthMap other_depth(48, 64);
+  other_depth.depth.setTo(1.0f);
+  const CompactDepthView other_cv(other_view, other_depth, rig.volume);
+  const SurfaceEvidence other(other_cv, fo), own(cv, fo), copied(cv, other);
+  std::mt19937 rng(2);
+  std::uniform_real_distribution<double> px(0, 80), py(0, 60), pz(0.9, 1.1);
+  int with_evidence = 0;
+  for (int n = 0; n < 20000; ++n) {
+    const Eigen::Vector3d x = rig.view.Unproject({px(rng), py(rng)}, pz(rng));
+    float a = 0, b = 0;
+    const bool has = own.LogProbability(x, &a);
+    ASSERT_EQ(copied.LogProbability(x, &b), has);
+    if (!has) continue;
+    ASSERT_TRUE(SameBits(a, b)) << n;
+    ++with_evidence;
+  }
+  EXPECT_GT(with_evidence, 10000);
+}
+
 TEST(SurfaceEvidence, BlockLogProbabilityMatchesLogProbabilityPerVoxel) {
   // Blocks across the image border, around the foreground depths and behind
   // them (occluded: skipped whole), in a view and in its coarsened copy.
