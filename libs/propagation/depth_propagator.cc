@@ -87,21 +87,50 @@ SplatMaps DepthPropagator::Splat(const DepthMap& filtered, const EdgeConsistency
   const bool one_sided = options_.one_sided_silhouettes;
   const bool silhouette_splat_only = options_.silhouette_pixels_splat_only;
   const float ratio = static_cast<float>(options_.photo.silhouette_ratio);
-  // 1. Edge pixels keep their depth with max(C+, C−) (§4.2); rows in parallel.
   cv::Mat is_edge_map = cv::Mat::zeros(rows, cols, CV_8U);
   tbb::parallel_for(tbb::blocked_range<int>(0, rows), [&](const tbb::blocked_range<int>& range) {
     for (int r = range.begin(); r != range.end(); ++r)
+      for (int c = 0; c < cols; ++c)
+        if (is_edge(r, c)) is_edge_map.at<std::uint8_t>(r, c) = 1;
+  });
+  const bool keep_blocked = options_.blocked_silhouettes_keep_depth;
+  // The pixel a silhouette edge pixel splats to (its consistent side).
+  const auto consistent_target = [&](int r, int c) {
+    const cv::Point step = NeighborStep(edges.direction.at<cv::Vec2f>(r, c));
+    const bool plus = edges.c_plus.at<float>(r, c) >= edges.c_minus.at<float>(r, c);
+    return plus ? cv::Point(c + step.x, r + step.y) : cv::Point(c - step.x, r - step.y);
+  };
+  const auto silhouette = [&](int r, int c) {
+    const float cp = edges.c_plus.at<float>(r, c), cm = edges.c_minus.at<float>(r, c);
+    return std::abs(cp - cm) > ratio * (cp + cm);
+  };
+  // Two silhouette edge pixels of one label that splat into each other: the
+  // two sides of a part two pixels wide (or one pixel on a diagonal).
+  const auto silhouette_pair = [&](int r, int c) {
+    const cv::Point t = consistent_target(r, c);
+    if (t.x < 0 || t.y < 0 || t.x >= cols || t.y >= rows || !is_edge_map.at<std::uint8_t>(t.y, t.x)) return false;
+    if (filtered.label.at<std::uint8_t>(t.y, t.x) != filtered.label.at<std::uint8_t>(r, c) || !silhouette(t.y, t.x))
+      return false;
+    return consistent_target(t.y, t.x) == cv::Point(c, r);
+  };
+  // 1. Edge pixels keep their depth with max(C+, C−) (§4.2); rows in parallel.
+  tbb::parallel_for(tbb::blocked_range<int>(0, rows), [&](const tbb::blocked_range<int>& range) {
+    for (int r = range.begin(); r != range.end(); ++r)
       for (int c = 0; c < cols; ++c) {
-        if (!is_edge(r, c)) continue;
-        is_edge_map.at<std::uint8_t>(r, c) = 1;
+        if (!is_edge_map.at<std::uint8_t>(r, c)) continue;
         const float cp = edges.c_plus.at<float>(r, c), cm = edges.c_minus.at<float>(r, c);
         float conf = scale(r, c) * std::max(cp, cm);
         const float d = filtered.depth.at<float>(r, c);
         const std::uint8_t l = filtered.label.at<std::uint8_t>(r, c);
         s.edge_label.at<std::uint8_t>(r, c) = l;
         s.edge_depth.at<float>(r, c) = d;
-        // Silhouette pixels feed the filter only through their splat on the consistent side.
-        if (silhouette_splat_only && std::abs(cp - cm) > ratio * (cp + cm)) conf = 0;
+        // Silhouette pixels feed the filter only through their splat on the
+        // consistent side, unless (blocked_silhouettes_keep_depth) the pixel
+        // and its target are a pair that splat into each other: then it keeps
+        // its own depth, else the part would reach the filter nowhere.
+        if (silhouette_splat_only && std::abs(cp - cm) > ratio * (cp + cm)) {
+          if (!(keep_blocked && silhouette_pair(r, c))) conf = 0;
+        }
         if (!(conf > 0)) continue;
         (l == kFg ? s.depth_fg : s.depth_bg).at<float>(r, c) = d;
         (l == kFg ? s.confidence_fg : s.confidence_bg).at<float>(r, c) = conf;

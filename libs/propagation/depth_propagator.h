@@ -104,6 +104,22 @@ struct PropagationOptions {
   // cannot spread from the edge pixel to the occluded side (false: they
   // keep max(C+, C−), as §4.2).
   bool silhouette_pixels_splat_only = true;
+  // ... except for two silhouette edge pixels of one label that splat into
+  // each other (ours, off by default): the two sides of a part two pixels
+  // wide. Their splats cannot land (edge pixels are not overwritten), so the
+  // part reaches the filter nowhere, the background's depth wins over it and
+  // fusion carves it (thin-degraded, 8 views: 71 % of the rod's pixels come out
+  // background, 59 % with this on). With it, such pixels keep their own depth
+  // with max(C+, C−), as §4.2 has it. Not on by default: a broader first
+  // version (every silhouette whose target is any edge pixel) raised thin
+  // recall on all six sets of the quality table (figurines 0.854 -> 0.884,
+  // figurines-noisy 0.785 -> 0.843, thin-degraded 0.452 -> 0.494) but put a
+  // sheet beside the degraded rod of tests/pipeline/thin_rod_test.cc (P@5
+  // 0.995 -> 0.915, bound 0.95: a textured background has edge pixels
+  // everywhere); this pair version gives that test P 0.966 / thin recall
+  // 0.397 (was 0.995 / 0.356) and has not been through the table yet
+  // (docs/benchmarks.md, "two propagation fixes").
+  bool blocked_silhouettes_keep_depth = false;
   // After the filter, each foreground depth is checked against the frames of
   // the widest-baseline neighbours (dense_consistency.h; ours: views = 0 turns it off).
   DenseConsistencyOptions consistency;

@@ -246,6 +246,63 @@ TEST(DepthPropagator, SplatGoesToTheConsistentSideAndTheStrongestWins) {
   }
 }
 
+TEST(DepthPropagator, ARodTwoPixelsWideKeepsItsDepthWhereItsSplatsCannotLand) {
+  // A vertical rod two pixels wide (columns 20 and 21) before a background
+  // with texture edges every 5 px: each rod pixel is a silhouette edge whose
+  // consistent side is the other rod pixel, an edge pixel too.
+  const int rows = 40, cols = 40;
+  cv::Mat image(rows, cols, CV_32FC3, cv::Scalar(0.5, 0.5, 0.5));
+  DepthMap m(rows, cols);
+  EdgeConsistency e;
+  e.c_plus = cv::Mat::zeros(rows, cols, CV_32F);
+  e.c_minus = cv::Mat::zeros(rows, cols, CV_32F);
+  e.direction = cv::Mat::zeros(rows, cols, CV_32FC2);
+  e.evaluated = cv::Mat::zeros(rows, cols, CV_8U);
+  const auto edge = [&](int r, int c, float d, std::uint8_t label, float cp, float cm) {
+    m.depth.at<float>(r, c) = d;
+    m.confidence.at<float>(r, c) = 1.0f;
+    m.label.at<std::uint8_t>(r, c) = label;
+    e.c_plus.at<float>(r, c) = cp;
+    e.c_minus.at<float>(r, c) = cm;
+    e.direction.at<cv::Vec2f>(r, c) = {1, 0};
+    e.evaluated.at<std::uint8_t>(r, c) = 255;
+  };
+  for (int r = 0; r < rows; ++r) {
+    image.at<cv::Vec3f>(r, 20) = image.at<cv::Vec3f>(r, 21) = cv::Vec3f(0.1f, 0.1f, 0.1f);
+    edge(r, 20, 0.6f, kFg, 0.9f, 0.1f);  // object to the right
+    edge(r, 21, 0.6f, kFg, 0.1f, 0.9f);  // object to the left
+    for (int c = 2; c < cols; c += 5)
+      if (c < 18 || c > 23) edge(r, c, 2.0f, kBg, 0.8f, 0.8f);  // background texture
+  }
+  PropagationOptions on, off;
+  on.blocked_silhouettes_keep_depth = true;
+  off.blocked_silhouettes_keep_depth = false;
+  const SplatMaps a = DepthPropagator(off).Splat(m, e), b = DepthPropagator(on).Splat(m, e);
+  for (int c = 20; c <= 21; ++c) {
+    EXPECT_FLOAT_EQ(a.confidence_fg.at<float>(10, c), 0.0f) << c;  // the rod reaches the filter nowhere
+    EXPECT_FLOAT_EQ(b.confidence_fg.at<float>(10, c), 0.9f) << c;  // it keeps max(C+, C−)
+    EXPECT_FLOAT_EQ(b.depth_fg.at<float>(10, c), 0.6f) << c;
+  }
+  // Densified: without the exception the background wins on the rod (fusion
+  // would carve it); with it the rod keeps its own depth.
+  const DepthMap da = DepthPropagator(off).Filter(image, a), db = DepthPropagator(on).Filter(image, b);
+  int rod_bg_off = 0, rod_fg_on = 0;
+  for (int r = 0; r < rows; ++r)
+    for (int c = 20; c <= 21; ++c) {
+      rod_bg_off += da.label.at<std::uint8_t>(r, c) == kBg;
+      rod_fg_on += db.label.at<std::uint8_t>(r, c) == kFg && std::abs(db.depth.at<float>(r, c) - 0.6f) < 1e-4f;
+    }
+  EXPECT_EQ(rod_bg_off, 2 * rows);
+  EXPECT_EQ(rod_fg_on, 2 * rows);
+  // A silhouette whose splat lands (column 20's right neighbour is no edge) still feeds the filter only through it.
+  DepthMap single = m;
+  EdgeConsistency e1 = e;
+  for (int r = 0; r < rows; ++r) e1.evaluated.at<std::uint8_t>(r, 21) = 0;
+  const SplatMaps s1 = DepthPropagator(on).Splat(single, e1);
+  EXPECT_FLOAT_EQ(s1.confidence_fg.at<float>(10, 20), 0.0f);
+  EXPECT_FLOAT_EQ(s1.confidence_fg.at<float>(10, 21), 0.9f);
+}
+
 TEST(DepthPropagator, FilterReproducesAPlaneFromItsEdgesAndKeepsSidesApart) {
   // Inverse depth affine in the pixel coordinates (a plane) on a frame of
   // foreground pixels around a flat 60×60 square, and a background square to its right.
