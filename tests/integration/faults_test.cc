@@ -7,7 +7,6 @@
 #include <sys/mount.h>
 #include <sys/wait.h>
 #include <unistd.h>
-#include <zlib.h>
 
 #include <gtest/gtest.h>
 #include <opencv2/imgcodecs.hpp>
@@ -28,6 +27,7 @@
 #include "common/auth.h"
 #include "common/job_store.h"
 #include "common/messaging.h"
+#include "common/black_png.h"
 #include "common/test_util.h"
 #include "daemon_process.h"
 #include "io/dataset.h"
@@ -38,6 +38,7 @@ namespace {
 namespace fs = std::filesystem;
 using std::chrono::milliseconds;
 
+using lfrecon::testing::BlackPng;
 using lfrecon::testing::DaemonProcess;
 using lfrecon::testing::MakeReference;
 using lfrecon::testing::ReferenceDataset;
@@ -54,30 +55,6 @@ int TempFiles(const fs::path& dir) {
   for (const auto& e : fs::recursive_directory_iterator(dir, ec))
     n += e.path().filename().string().find(".tmp") != std::string::npos;
   return n;
-}
-
-// A valid PNG of `width` x `height` 1-bit grey pixels, all black: deflate
-// makes it small however large it is (20000x20000: 50 MB of rows, a 49 KB file).
-std::string BlackPng(std::uint32_t width, std::uint32_t height) {
-  auto be32 = [](std::uint32_t v) {
-    return std::string{static_cast<char>(v >> 24), static_cast<char>(v >> 16), static_cast<char>(v >> 8),
-                       static_cast<char>(v)};
-  };
-  auto chunk = [&](const std::string& type, const std::string& data) {
-    const std::string body = type + data;
-    const auto crc = static_cast<std::uint32_t>(
-        ::crc32(0, reinterpret_cast<const Bytef*>(body.data()), static_cast<uInt>(body.size())));
-    return be32(static_cast<std::uint32_t>(data.size())) + body + be32(crc);
-  };
-  const std::string ihdr = be32(width) + be32(height) + std::string("\x01\x00\x00\x00\x00", 5);  // 1 bit, grey
-  const std::string rows(static_cast<std::size_t>(height) * (1 + (width + 7) / 8), '\0');  // filter 0, zeros
-  uLongf size = ::compressBound(rows.size());
-  std::string z(size, '\0');
-  EXPECT_EQ(::compress2(reinterpret_cast<Bytef*>(z.data()), &size, reinterpret_cast<const Bytef*>(rows.data()),
-                        rows.size(), 1),
-            Z_OK);
-  z.resize(size);
-  return std::string("\x89PNG\r\n\x1a\n", 8) + chunk("IHDR", ihdr) + chunk("IDAT", z) + chunk("IEND", "");
 }
 
 // Process `pid`'s memory figure `field` ("VmHWM:" the peak resident, "VmRSS:"
