@@ -19,6 +19,7 @@ PipelineOptions OptionsFromFlags(const ReconstructionFlags& f) {
     if (*f.max_frame_gap < 0) throw OptionError("--max-frame-gap must be >= 0 (0: no limit)");
     options.depth.max_frame_gap = *f.max_frame_gap;
   }
+  if (f.no_mask_free_space) options.mask_free_space.confidence = 0;
   options.Check();
   return options;
 }

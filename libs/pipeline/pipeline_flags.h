@@ -19,6 +19,8 @@ struct ReconstructionFlags {
   // 0: no limit); unset: the default (1000). An open stream's views are processed
   // two gaps behind its newest frame (ReconstructionPlan::SettledFrames).
   std::optional<int> max_frame_gap;
+  // Object masks give V only (--no-mask-free-space): PipelineOptions::mask_free_space off.
+  bool no_mask_free_space = false;
 };
 
 // PipelineOptions defaults with the flags applied; checked (PipelineOptions::Check). Throws OptionError.

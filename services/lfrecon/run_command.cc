@@ -78,6 +78,7 @@ int RunPipeline(const RunArgs& args) {
   flags.color_views = args.color_views;
   flags.all_views = args.all_views;
   flags.max_frame_gap = args.max_frame_gap;
+  flags.no_mask_free_space = args.no_mask_free_space;
   PipelineOptions options = OptionsFromFlags(flags);
   const Dataset ds = Dataset::Open(args.data.Resolve());
   if (!args.views.empty()) options.views = ParseViewRange(args.views, ds.NumViews());
@@ -115,7 +116,6 @@ int RunPipeline(const RunArgs& args) {
                    {"converged", ps.converged}};
     if (!args.out.empty()) WriteRefinedModel(ds, views, args.out / "sparse_refined");
   }
-  if (args.no_mask_free_space) options.mask_free_space.confidence = 0;
   if (args.mask_carving) options.refine_options.carving.carve_outside_masks = true;
   if (args.keep_blocked_silhouettes) options.propagation.blocked_silhouettes_keep_depth = true;
   options.preview_views = args.outputs.previews;
