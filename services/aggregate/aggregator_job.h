@@ -68,6 +68,7 @@ struct Aggregator::Job {
   std::vector<char> fused;
   std::vector<int> unreadable;  // stored dense maps the fusion thread could not read: done again
   std::atomic<int> views_fused{0};  // changes under grid_mu (with the grid)
+  std::atomic<int> masked_views{0};  // of those, fused with their frame's mask as free space
   std::atomic<std::uint64_t> active_voxels{0};
   enum Outcome { kFusing = 0, kFinished = 1, kFailed = 2 };
   std::atomic<int> outcome{kFusing};  // kFinished: every view fused, outputs written
@@ -121,6 +122,13 @@ struct Aggregator::Job {
 
 // The job's fusion grid, empty: V, voxel and σ_s as the plan sets them (as the embedded pipeline's).
 std::unique_ptr<ProbabilisticFusion> NewFusion(const JobGeometry& geo);
+// What the fusion integrates for view `v`, as `lfrecon run` does (EmbeddedPipeline):
+// its stored dense map `dense` with the background floor (gated by the view's
+// sparse map, read here) and then, unless the job's options turn it off, the
+// free space outside its frame's mask when the frame carries one (Frame.mask,
+// WithMaskFreeSpace). `masked` (may be null): whether a mask was applied.
+// Throws InputError naming the frame's file when its mask is unreadable.
+DepthMap FusionInput(const JobStore& store, const JobGeometry& geo, int v, DepthMap dense, bool* masked);
 // The fused mesh with colour from the plan's colour frames (as the embedded
 // pipeline's), those of `frame_ok` read from the store.
 void ColourMesh(const JobStore& store, const JobGeometry& geo, const std::vector<char>& frame_ok, TriangleMesh* mesh);

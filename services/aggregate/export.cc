@@ -90,7 +90,9 @@ pb::Envelope RefinedExportReply(const JobStore& store, RefineSnapshot snap) {
   for (int v = 0; v < n; ++v) {
     if (!snap.fused[v]) continue;
     if (StopRequested()) throw std::runtime_error("lfrecon-aggregate is stopping");
-    fusion->Integrate(geo.views[v], store.ReadMap(snap.id, pb::MAP_DENSE, v, geo.views[v]), v);
+    // As the job's fusion integrated it (background floor, the mask's free space), as lfrecon run does.
+    DepthMap dense = store.ReadMap(snap.id, pb::MAP_DENSE, v, geo.views[v]);
+    fusion->Integrate(geo.views[v], FusionInput(store, geo, v, std::move(dense), nullptr), v);
     ++fused;
   }
   const double seconds_fusion = tf.Seconds();

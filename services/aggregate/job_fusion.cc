@@ -9,6 +9,7 @@
 #include <sstream>
 
 #include "io/ply.h"
+#include "fusion/free_space.h"
 #include "pipeline/embedded_pipeline.h"
 #include "util/error.h"
 #include "util/progress.h"
@@ -19,6 +20,31 @@ namespace fs = std::filesystem;
 // The job's fusion grid, empty: V, voxel and σ_s as the plan sets them (as the embedded pipeline's).
 std::unique_ptr<ProbabilisticFusion> NewFusion(const JobGeometry& geo) {
   return std::make_unique<ProbabilisticFusion>(geo.plan.fusion);
+}
+
+DepthMap FusionInput(const JobStore& store, const JobGeometry& geo, int v, DepthMap dense, bool* masked) {
+  const PipelineOptions& po = geo.options;
+  const PinholeView& view = geo.views[static_cast<std::size_t>(v)];
+  if (masked) *masked = false;
+  if (NeedsBackgroundFloor(po)) {  // as lfrecon run: the same function on the same maps
+    DepthMap sparse;
+    try {
+      sparse = store.ReadMap(geo.id, pb::MAP_SPARSE, v, view);
+    } catch (const InputError& e) {  // the floor is then gated by the dense map alone
+      spdlog::warn("aggregate: job {}: sparse map of view {} unreadable ({}): background floor gated without it",
+                   geo.id, v, e.what());
+    }
+    dense = WithBackgroundFloor(dense, sparse, view, geo.volume, po);
+  }
+  const PipelineOptions::MaskFreeSpace& mf = po.mask_free_space;
+  if (mf.confidence > 0) {  // after the floor, as lfrecon run
+    const cv::Mat mask = store.ReadMask(geo.id, v, view);
+    if (!mask.empty()) {
+      dense = WithMaskFreeSpace(dense, mask, mf.confidence, mf.margin_px);
+      if (masked) *masked = true;
+    }
+  }
+  return dense;
 }
 
 std::unique_ptr<Aggregator::Job> Aggregator::LoadOrFail(const std::string& id) {
@@ -169,16 +195,8 @@ void Aggregator::FusionLoop(Job* jp) const {
           job.unreadable.push_back(v);
           continue;
         }
-        if (NeedsBackgroundFloor(po)) {  // as lfrecon run: the same function on the same maps
-          DepthMap sparse;
-          try {
-            sparse = store_.ReadMap(id, pb::MAP_SPARSE, v, geo->views[v]);
-          } catch (const InputError& e) {  // the floor is then gated by the dense map alone
-            spdlog::warn("aggregate: job {}: sparse map of view {} unreadable ({}): background floor gated without it",
-                         id, v, e.what());
-          }
-          map = WithBackgroundFloor(map, sparse, geo->views[v], geo->volume, po);
-        }
+        bool masked = false;
+        map = FusionInput(store_, *geo, v, std::move(map), &masked);
         {
           std::lock_guard<std::mutex> grid(job.grid_mu);
           job.fusion->Integrate(geo->views[v], map, v);
@@ -191,6 +209,7 @@ void Aggregator::FusionLoop(Job* jp) const {
             job.fused[v] = 1;
           }
           ++job.views_fused;
+          if (masked) ++job.masked_views;
         }
         if (++done == job.replay && job.replay > 0)
           spdlog::info("aggregate: job {}: {} views replayed from the checkpoint in {:.1f} s", id, job.replay,
@@ -276,8 +295,8 @@ void Aggregator::Reap(Job& job) {
   if (outcome == Job::kFailed) {
     EndJob(job, pb::STATE_FAILED, "fusion: " + job.fusion_error);
   } else if (outcome == Job::kFinished) {
-    spdlog::info("aggregate: job {}: {} views fused, mesh {} triangles ({:.1f} s)", job.id, job.views_fused.load(),
-                 job.triangles, job.seconds_outputs);
+    spdlog::info("aggregate: job {}: {} views fused ({} with their mask's free space), mesh {} triangles ({:.1f} s)",
+                 job.id, job.views_fused.load(), job.masked_views.load(), job.triangles, job.seconds_outputs);
     EndJob(job, pb::STATE_DONE, "");
   }
 }
@@ -299,6 +318,7 @@ pb::JobStatus Aggregator::Status(const Job& job) const {
   s.set_active_voxels(static_cast<std::uint32_t>(job.active_voxels));
   s.set_leases_expired(job.leases_expired);
   s.set_tasks_failed(job.tasks_failed);
+  s.set_masked_views(static_cast<std::uint32_t>(job.masked_views));
   if (job.state == pb::STATE_DONE) s.set_triangles(job.triangles);
   return s;
 }

@@ -9,6 +9,7 @@
 #include <cmath>
 #include <cstring>
 #include <fstream>
+#include <limits>
 #include <random>
 #include <opencv2/imgcodecs.hpp>
 #include <sstream>
@@ -248,6 +249,14 @@ cv::Mat JobStore::ReadFrame(const std::string& id, int index, const PinholeView&
   return FrameFromProto(f, expect.width, expect.height, path.string());
 }
 
+cv::Mat JobStore::ReadMask(const std::string& id, int index, const PinholeView& expect) const {
+  const fs::path path = FramePath(id, index);
+  pb::Frame f;
+  ParseFile(path, &f);
+  if (static_cast<int>(f.index()) != index) throw InputError(path.string(), "index", "holds frame " + std::to_string(f.index()));
+  return MaskFromProto(f, expect.width, expect.height, path.string());
+}
+
 void JobStore::WriteMap(const std::string& id, const pb::DepthMap& map) const {
   WriteFileAtomic(MapPath(id, map.kind(), static_cast<int>(map.view())), map.SerializeAsString());
 }
@@ -432,6 +441,41 @@ cv::Mat FrameFromProto(const pb::Frame& f, int width, int height, const std::str
   return image;
 }
 
+cv::Mat MaskFromProto(const pb::Frame& f, int width, int height, const std::string& what) {
+  const std::string& bytes = f.mask();
+  if (bytes.empty()) return cv::Mat();
+  auto size_text = [](int w, int h) { return std::to_string(w) + "x" + std::to_string(h); };
+  // The size from the PNG header before any pixel is decoded: a mask decodes to at most its frame's pixels.
+  const auto header = ReadImageHeader(bytes);
+  if (!header || header->format != "png")
+    throw InputError(what, "mask", "not PNG data (" + std::to_string(bytes.size()) + " bytes)");
+  if (header->width != width || header->height != height)
+    throw InputError(what, "mask", "mask is " + size_text(header->width, header->height) + ", its frame " +
+                                       size_text(width, height));
+  if (bytes.size() > static_cast<std::size_t>(std::numeric_limits<int>::max()))
+    throw InputError(what, "mask", "larger than 2 GiB");
+  cv::Mat mask;
+  try {
+    mask = cv::imdecode(cv::Mat(1, static_cast<int>(bytes.size()), CV_8U, const_cast<char*>(bytes.data())),
+                        cv::IMREAD_UNCHANGED | cv::IMREAD_IGNORE_ORIENTATION);
+  } catch (const cv::Exception& e) {
+    throw InputError(what, "mask", std::string("cannot be decoded: ") + e.what());
+  }
+  if (mask.empty()) throw InputError(what, "mask", "PNG data that does not decode");
+  if (mask.type() != CV_8UC1)
+    throw InputError(what, "mask", "must be 8-bit with one channel (" + std::to_string(mask.channels()) +
+                                       " channels, depth " + std::to_string(mask.depth()) + ")");
+  if (mask.cols != width || mask.rows != height)
+    throw InputError(what, "mask", "decodes to " + size_text(mask.cols, mask.rows) + ", its frame " +
+                                       size_text(width, height));
+  return mask;
+}
+
+std::string MaskToPng(const cv::Mat& mask, const std::string& what) {
+  if (mask.type() != CV_8UC1) throw std::invalid_argument("a mask must be CV_8UC1");
+  return EncodePng(mask, what + " mask");
+}
+
 pb::Frame CompactFrameProto(pb::Frame f, const std::string& what) {
   if (f.encoding() != "bgr8" && f.encoding() != "f32-bgr") return f;
   if (f.has_source()) throw InputError(what, "source", "a raw frame is the frame as read: no source camera");
@@ -462,6 +506,17 @@ StoreFrameEncoder::StoreFrameEncoder(const Dataset& dataset) : ds_(dataset) {
 StoreFrameEncoder::~StoreFrameEncoder() = default;
 
 pb::Frame StoreFrameEncoder::Encode(int k, bool validate) {
+  pb::Frame f = EncodeImage(k, validate);
+  // The mask as `lfrecon run` reads it (Dataset::ReadMask: at the frame's size, undistorted);
+  // a frame without one (an image without alpha among others with it) carries none.
+  if (ds_.HasMasks()) {
+    const cv::Mat mask = ds_.ReadMask(k);
+    if (!mask.empty()) f.set_mask(MaskToPng(mask, "frame " + std::to_string(k)));
+  }
+  return f;
+}
+
+pb::Frame StoreFrameEncoder::EncodeImage(int k, bool validate) {
   const DatasetView& view = ds_.views().at(static_cast<std::size_t>(k));
   pb::Frame f;
   f.set_index(static_cast<std::uint32_t>(k));
@@ -545,6 +600,7 @@ ReconstructionFlags JobFlags(const pb::JobOptions& o) {
   if (o.has_color_views()) f.color_views = o.color_views();
   f.all_views = o.all_views();
   if (o.has_max_frame_gap()) f.max_frame_gap = o.max_frame_gap();
+  f.no_mask_free_space = o.no_mask_free_space();
   return f;
 }
 
@@ -582,6 +638,7 @@ DatasetOptions ToDatasetOptions(const pb::JobSpec& spec) {
   d.video_path = spec.video_path();
   d.colmap_dir = spec.colmap_dir();
   d.transforms_path = spec.transforms_path();
+  d.masks_dir = spec.masks_dir();
   d.max_image_size = static_cast<int>(std::min<std::uint32_t>(spec.max_image_size(), 1u << 20));
   if (const std::optional<BoundingBox> b = SpecVolume(spec)) d.bbox = *b;
   d.Check();

@@ -5,7 +5,8 @@
 //   JOB/manifest.pb          JobManifest (cameras, V, options), written by ingest
 //   JOB/frames/NNNNNN.pb     Frame: the image as received (JPEG/PNG bytes as on disk or as pushed,
 //                            a video or raw frame as 8-bit lossless PNG), downscaled and undistorted
-//                            on read (ingest; StoreFrameEncoder, FrameFromProto)
+//                            on read (ingest; StoreFrameEncoder, FrameFromProto), and its object
+//                            mask when the dataset has masks (PNG of the frame as read; MaskFromProto)
 //   JOB/stream.pb            StreamOpen of a client-pushed job (ingest); manifest.pb follows at its end
 //   JOB/ingest.done          frame count, when ingest has spooled every frame
 //   JOB/sparse/NNNNNN.pb     DepthMap, sparse (§3.1) (aggregator, from depth workers)
@@ -59,6 +60,9 @@ class JobStore {
   void WriteFrame(const std::string& id, const pb::Frame& frame) const;
   // CV_32FC3 BGR in [0, 1]; checked against the manifest camera's size.
   cv::Mat ReadFrame(const std::string& id, int index, const PinholeView& expect) const;
+  // The object mask stored with frame `index` (MaskFromProto: CV_8U of the
+  // camera's size, nonzero = the object); an empty Mat when the frame has none.
+  cv::Mat ReadMask(const std::string& id, int index, const PinholeView& expect) const;
   void WriteMap(const std::string& id, const pb::DepthMap& map) const;
   DepthMap ReadMap(const std::string& id, pb::MapKind kind, int view, const PinholeView& expect) const;
 
@@ -127,6 +131,14 @@ pb::Frame FrameToProto(int index, const cv::Mat& image, const pb::Camera& camera
 // undistorted when the frame has a source camera (PrepareFrame), so the pixels
 // equal what io/Dataset hands `lfrecon run` for the same file.
 cv::Mat FrameFromProto(const pb::Frame& frame, int width, int height, const std::string& what);
+// The frame's object mask (Frame.mask): an empty Mat when it has none, else
+// CV_8U width x height, nonzero = the object. The PNG header is checked
+// against the size before any pixel is decoded; anything else (another format,
+// size or pixel type, bytes that do not decode) throws InputError naming
+// `what` (the frame) and its mask.
+cv::Mat MaskFromProto(const pb::Frame& frame, int width, int height, const std::string& what);
+// Frame.mask for `mask` (CV_8U, as io/Dataset's ReadMask gives it): lossless 8-bit PNG.
+std::string MaskToPng(const cv::Mat& mask, const std::string& what);
 // A client's raw frame ("bgr8", "f32-bgr") as the store keeps it ("png" when
 // 8-bit, "f32-bgr" otherwise); others unchanged. Throws InputError on a size mismatch.
 pb::Frame CompactFrameProto(pb::Frame frame, const std::string& what);
@@ -138,7 +150,9 @@ Camera SourceCameraFromProto(const pb::SourceCamera& source, const std::string& 
 // as on disk (PNG, JPEG), a video frame as 8-bit lossless PNG, each with its
 // source camera (downscale and undistortion happen on read); images of other
 // formats (TIFF, EXR, BMP) are read through the dataset and stored as
-// FrameToProto does. Used by ingest's submit path and by `lfrecon stream`.
+// FrameToProto does. When the dataset has masks, each frame carries its mask as
+// `lfrecon run` reads it (Dataset::ReadMask, MaskToPng). Used by ingest's
+// submit path and by `lfrecon stream`.
 class StoreFrameEncoder {
  public:
   explicit StoreFrameEncoder(const Dataset& dataset);
@@ -147,6 +161,8 @@ class StoreFrameEncoder {
   pb::Frame Encode(int k, bool validate);
 
  private:
+  pb::Frame EncodeImage(int k, bool validate);  // the frame without its mask
+
   const Dataset& ds_;
   std::unique_ptr<FrameSource> video_;     // raw video frames, sequential
   std::unique_ptr<FrameSource> prepared_;  // the dataset's own frames, for other formats

@@ -11,7 +11,9 @@
 // aggregator's, from all the cameras) and the job handed to the aggregator.
 // A stream that gives V is the aggregator's from its opening on: it plans and
 // processes the views as their frames arrive (services/aggregate/stream_plan.cc).
-// The frames are stored as the submit path stores them (common/job_store.h).
+// The frames are stored as the submit path stores them (common/job_store.h),
+// each with its object mask when the dataset has masks (Frame.mask; checked
+// against the frame's camera like the frame itself).
 #include <spdlog/spdlog.h>
 
 #include <CLI/CLI.hpp>
@@ -129,8 +131,8 @@ void Spool(zmq::context_t& context, const IngestOptions& o, const JobStore& stor
         ++kept;
       } else {
         // As on disk (validated by decoding it once), or a video frame as 8-bit PNG.
-        const pb::Frame frame = frames.Encode(k, true);
-        bytes += static_cast<double>(frame.data().size());
+        const pb::Frame frame = frames.Encode(k, true);  // with its mask when the dataset has masks
+        bytes += static_cast<double>(frame.data().size() + frame.mask().size());
         store.WriteFrame(id, frame);
         if (o.frame_delay_ms > 0) std::this_thread::sleep_for(std::chrono::milliseconds(o.frame_delay_ms));
       }
@@ -385,13 +387,16 @@ void StreamWriter(zmq::context_t& context, const IngestOptions& o, const JobStor
       const PinholeView view = CameraFromProto(f.camera(), what);
       // Validated as the workers will read it: image header against the camera before decoding, then decoded.
       FrameFromProto(f, view.width, view.height, what);
+      // Its mask, if any, as the aggregator's fusion will read it: PNG header against the camera, then decoded.
+      MaskFromProto(f, view.width, view.height, what);
+      const std::uint64_t frame_bytes = f.data().size() + f.mask().size();
       const double quota = o.job_quota_gb * 1e9;
       std::uint64_t bytes_before;
       {
         std::lock_guard<std::mutex> lk(s.mu);
         bytes_before = s.bytes;
       }
-      if (static_cast<double>(bytes_before + f.data().size()) > quota)
+      if (static_cast<double>(bytes_before + frame_bytes) > quota)
         throw InputError(what, "the job's frames exceed the per-job quota (--job-quota-gb " +
                                    std::to_string(o.job_quota_gb) + ")");
       store.WriteFrame(id, f);
@@ -401,7 +406,7 @@ void StreamWriter(zmq::context_t& context, const IngestOptions& o, const JobStor
       pb::StreamCredit* c = reply.mutable_stream_credit();
       std::lock_guard<std::mutex> lk(s.mu);
       ++s.stored;
-      s.bytes += f.data().size();
+      s.bytes += frame_bytes;
       c->set_index(k);
       c->set_frames_stored(static_cast<std::uint32_t>(s.stored));
       c->set_in_flight(static_cast<std::uint32_t>(s.unanswered));
@@ -535,6 +540,7 @@ int Serve(const IngestOptions& o) {
         CheckSubmittedPath(o.data_roots, "video_path", spec.video_path());
         CheckSubmittedPath(o.data_roots, "colmap_dir", spec.colmap_dir());
         CheckSubmittedPath(o.data_roots, "transforms_path", spec.transforms_path());
+        CheckSubmittedPath(o.data_roots, "masks_dir", spec.masks_dir());
         auto ds = std::make_shared<Dataset>(Dataset::Open(ToDatasetOptions(spec)));
         // Every option validated (with V) before the job is accepted.
         JobFusionOptions(JobPipelineOptions(spec.options()), ds->bbox());
@@ -554,7 +560,8 @@ int Serve(const IngestOptions& o) {
         if (!agg.Request(created, std::chrono::milliseconds(5000)))
           spdlog::warn("ingest: aggregator {} did not answer; it will find job {} in the store", o.aggregate, id);
         start([&context, &o, &store, id, ds] { Spool(context, o, store, id, ds, false); });
-        spdlog::info("ingest: job {}: {} views ({}, V from {})", id, ds->NumViews(), ds->pose_source(), ds->bbox_source());
+        spdlog::info("ingest: job {}: {} views ({}, V from {}{})", id, ds->NumViews(), ds->pose_source(),
+                     ds->bbox_source(), ds->HasMasks() ? ", masks from " + ds->mask_source() + " stored with the frames" : "");
         reply = NewEnvelope(id);
         reply.mutable_submit_reply()->set_job_id(id);
         reply.mutable_submit_reply()->set_num_views(ds->NumViews());
@@ -568,7 +575,7 @@ int Serve(const IngestOptions& o) {
         CheckAdmission(static_cast<int>(spoolers.size() + streams.size()), "spooled or streamed", store, o,
                        "open the stream again later");
         if (!spec.dataset_dir().empty() || !spec.images_dir().empty() || !spec.video_path().empty() ||
-            !spec.colmap_dir().empty() || !spec.transforms_path().empty())
+            !spec.colmap_dir().empty() || !spec.transforms_path().empty() || !spec.masks_dir().empty())
           throw OptionError("a stream names no paths: its client pushes the frames and cameras");
         const PipelineOptions po = JobPipelineOptions(spec.options());  // every option checked before the job exists
         if (const std::optional<BoundingBox> b = SpecVolume(spec)) JobFusionOptions(po, *b);

@@ -62,6 +62,7 @@ nlohmann::json StatusJson(const std::string& job, const pb::JobStatus& s) {
           {"sparse_done", s.sparse_done()},
           {"dense_done", s.dense_done()},
           {"views_fused", s.views_fused()},
+          {"masked_views", s.masked_views()},
           {"leases_expired", s.leases_expired()},
           {"active_voxels", s.active_voxels()},
           {"triangles", s.triangles()},
@@ -100,6 +101,7 @@ int PrintStatus(const std::string& job, const pb::JobStatus& s, bool json) {
     std::cout << job << ": " << pb::JobState_Name(s.state()).substr(6) << ", " << s.views_fused() << "/"
               << s.num_views() << " views fused (" << s.frames_spooled() << " frames spooled, " << s.sparse_done()
               << " sparse, " << s.dense_done() << " dense), " << s.seconds() << " s";
+    if (s.masked_views()) std::cout << ", " << s.masked_views() << " with their mask's free space";
     if (s.leases_expired()) std::cout << ", " << s.leases_expired() << " tasks re-issued";
     if (!s.message().empty()) std::cout << ": " << s.message();
     std::cout << "\n";
@@ -119,6 +121,10 @@ void JobOptionFlags::AddTo(CLI::App* cmd) {
                   "Views more than this many frames apart are never neighbours (as lfrecon run --max-frame-gap; 0: "
                   "no limit; default 1000). With a bound, a stream's views are processed while it is open, 2 gaps "
                   "behind its newest frame; without, after its end");
+  cmd->add_flag("--no-mask-free-space", no_mask_free_space,
+                "With masks (masks/, an alpha channel, mask_path; each frame carries its mask to the service): use "
+                "them for V only (as lfrecon run --no-mask-free-space). By default the fusion also takes every pixel "
+                "more than 2 px outside its mask as empty space through V");
 }
 
 pb::JobOptions JobOptionFlags::ToProto() const {
@@ -130,6 +136,7 @@ pb::JobOptions JobOptionFlags::ToProto() const {
   o.set_color_views(color_views);
   o.set_all_views(all_views);
   if (max_frame_gap != -1) o.set_max_frame_gap(max_frame_gap);
+  o.set_no_mask_free_space(no_mask_free_space);
   svc::JobPipelineOptions(o);  // every job option checked here, as lfrecon run does (exit 2)
   return o;
 }
@@ -144,7 +151,12 @@ void AddServiceCommands(CLI::App& root, int* exit_code) {
       double wait_s = 3600;
     };
     auto a = std::make_shared<Args>();
-    auto* cmd = root.add_subcommand("submit", "Submit a job to the streaming service; prints its id");
+    auto* cmd = root.add_subcommand(
+        "submit",
+        "Submit a job to the streaming service; prints its id. lfrecon-ingest opens the dataset as lfrecon run does "
+        "(the paths are read on its machine) and stores each frame with its object mask when the dataset has masks "
+        "(DATASET/masks/ or --masks, an alpha channel, mask_path): V and the fusion's free space come from them as in "
+        "lfrecon run");
     a->data.AddTo(cmd);
     AddEndpointFlags(cmd, &a->ep, true);
     a->job.AddTo(cmd);
@@ -159,8 +171,7 @@ void AddServiceCommands(CLI::App& root, int* exit_code) {
       spec->set_video_path(Abs(d.video_path));
       spec->set_colmap_dir(Abs(d.colmap_dir));
       spec->set_transforms_path(Abs(d.transforms_path));
-      if (!d.masks_dir.empty())
-        throw OptionError("--masks: the service reads masks from the dataset folder (DATASET/masks/ or mask_path) only");
+      spec->set_masks_dir(Abs(d.masks_dir));
       spec->set_max_image_size(static_cast<std::uint32_t>(d.max_image_size));
       for (double v : a->data.bbox) spec->add_bbox(v);
       *spec->mutable_options() = a->job.ToProto();

@@ -1,7 +1,8 @@
 // `lfrecon stream`: a client-pushed job (proto/README.md "Streams"). Opens a
 // job on lfrecon-ingest, prints its id, pushes each frame as the job store
 // keeps it (the image file's bytes as on disk, a video frame as 8-bit lossless
-// PNG; StoreFrameEncoder) with its camera, at most the granted credits in
+// PNG; StoreFrameEncoder) with its camera and, when the dataset has masks,
+// its object mask as lfrecon run reads it, at most the granted credits in
 // flight, optionally paced (--rate), then ends the stream. The cameras and V
 // are this client's (the dataset opened here, as `lfrecon run` opens it), so
 // the job computes what `lfrecon run` computes on the same frames.
@@ -68,7 +69,9 @@ void AddStreamCommand(CLI::App& root, int* exit_code) {
   auto* cmd = root.add_subcommand(
       "stream",
       "Stream a dataset's frames to the service as a live camera would (a client-pushed job): opens the job, prints "
-      "its id, pushes each frame as stored on disk (a video frame as lossless PNG) with its camera, ends the stream. "
+      "its id, pushes each frame as stored on disk (a video frame as lossless PNG) with its camera and, when the "
+      "dataset has masks (masks/ or --masks, an alpha channel, mask_path), its object mask (V and the fusion's free "
+      "space then come from them as in lfrecon run), ends the stream. "
       "With --max-frame-gap N its views are planned and fused while it streams (2 N frames behind the newest), the "
       "rest after its end; without, all after its end. It computes what lfrecon run computes on the same frames "
       "(with the same --max-frame-gap)");
@@ -129,11 +132,12 @@ void AddStreamCommand(CLI::App& root, int* exit_code) {
           if (due > 0) std::this_thread::sleep_for(std::chrono::duration<double>(due));
         }
         const pb::Frame frame = frames.Encode(k, false);  // ingest validates it
-        if (frame.data().size() > opened.max_frame_bytes())
-          throw InputError(ds.ImagePath(k).string(), std::to_string(frame.data().size()) +
-                                                         " bytes, more than ingest takes in a frame (" +
+        const std::size_t frame_bytes = frame.data().size() + frame.mask().size();  // the mask travels with it
+        if (frame_bytes > opened.max_frame_bytes())
+          throw InputError(ds.ImagePath(k).string(), std::to_string(frame_bytes) +
+                                                         " bytes with its mask, more than ingest takes in a frame (" +
                                                          std::to_string(opened.max_frame_bytes()) + ")");
-        bytes_sent += frame.data().size();
+        bytes_sent += frame_bytes;
         client.Push(frame, timeout);
         follow_tick();
       }

@@ -173,5 +173,61 @@ TEST(StoreEncoding, HeaderCheckedAgainstTheCameraBeforeDecoding) {
   EXPECT_THROW(FrameFromProto(j, 48, 27, "cut"), InputError);
 }
 
+// Object masks travel with their frames (Frame.mask): each frame of a masked
+// dataset carries its mask as `lfrecon run` reads it (Dataset::ReadMask:
+// downscaled with the frame, 0/255), as lossless PNG, a few bytes a pixel
+// at most; a frame without a mask carries none; a mask's PNG header is checked
+// against the frame's size before it is decoded.
+TEST(StoreEncoding, MasksTravelWithTheirFramesExactly) {
+  lfrecon::testing::TempDir tmp;
+  const fs::path data = tmp.path() / "masked";
+  const auto r = lfrecon::testing::RunShell(kBin + "lfrecon -q synth --scene sphere --masks --frames 6 --width 96 "
+                                            "--height 54 --depth-every 0 --no-meshes --format jpg --out " +
+                                            data.string());
+  ASSERT_EQ(r.code, 0) << r.output;
+  for (int max_image_size : {0, 64}) {
+    DatasetOptions d;
+    d.dataset_dir = data;
+    d.max_image_size = max_image_size;
+    const Dataset ds = Dataset::Open(d);
+    ASSERT_TRUE(ds.HasMasks());
+    StoreFrameEncoder encoder(ds);
+    double mask_bytes = 0, pixels = 0;
+    for (int k = 0; k < ds.NumViews(); ++k) {
+      pb::Frame back;
+      ASSERT_TRUE(back.ParseFromString(encoder.Encode(k, true).SerializeAsString()));
+      const PinholeView v = ds.View(k);
+      const cv::Mat got = MaskFromProto(back, v.width, v.height, "frame " + std::to_string(k));
+      const cv::Mat want = ds.ReadMask(k);
+      ASSERT_EQ(got.type(), CV_8UC1);
+      ASSERT_EQ(got.size(), want.size());
+      EXPECT_EQ(cv::norm(got, want, cv::NORM_INF), 0.0) << "mask of frame " << k;
+      EXPECT_GT(cv::countNonZero(got), 0);
+      EXPECT_LT(cv::countNonZero(got), v.width * v.height);
+      mask_bytes += static_cast<double>(back.mask().size());
+      pixels += static_cast<double>(v.width) * v.height;
+    }
+    std::printf("masks read at %s: %.3f bytes a pixel stored\n",
+                max_image_size ? std::to_string(max_image_size).c_str() : "full size", mask_bytes / pixels);
+    EXPECT_LT(mask_bytes / pixels, 0.5);
+  }
+  // No mask: an empty Mat. A header claiming 60000 x 60000 for a 96 x 54 frame: refused undecoded, naming the frame.
+  pb::Frame f;
+  EXPECT_TRUE(MaskFromProto(f, 96, 54, "frame 3").empty());
+  std::vector<uchar> buf;
+  ASSERT_TRUE(cv::imencode(".png", cv::Mat(54, 96, CV_8U, cv::Scalar(255)), buf));
+  std::string bytes(buf.begin(), buf.end());
+  for (int at : {16, 20})
+    for (int i = 0; i < 4; ++i) bytes[at + i] = static_cast<char>((60000u >> (24 - 8 * i)) & 0xff);
+  f.set_mask(bytes);
+  try {
+    MaskFromProto(f, 96, 54, "frame 3");
+    ADD_FAILURE() << "decoded";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("frame 3 [mask]: mask is 60000x60000, its frame 96x54"), std::string::npos)
+        << e.what();
+  }
+}
+
 }  // namespace
 }  // namespace lfrecon::svc
