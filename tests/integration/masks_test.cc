@@ -1,9 +1,9 @@
 // Object masks in the service (Frame.mask, proto/lfrecon_service.proto): a
 // generated scene with masks (`lfrecon synth --masks`, scene.json removed so
 // that V is the masks' visual hull) submitted to the service, and streamed to
-// it, gives lfrecon run's fused mesh with the masks' free space, vertex for
-// vertex, and its count of masked views; without the masks' free space the
-// mesh differs (so the comparison can fail). A mask of the wrong size, or one
+// it (also with --masks DIR), gives lfrecon run's fused mesh with the masks'
+// free space, vertex for vertex, and its count of masked views; without the
+// masks' free space the mesh differs (so the comparison can fail). A mask of the wrong size, or one
 // that is not PNG, is refused at ingest with an error naming the frame.
 // Real daemons over ipc:// in a temporary folder.
 #include <gtest/gtest.h>
@@ -181,6 +181,14 @@ TEST_F(MasksTest, SubmitAndStreamOfMaskedDatasetEqualRun) {
   ASSERT_TRUE(JobStore::ValidJobId(plain)) << plain;
   EXPECT_EQ(Status(plain).masked_views(), 0u);
   EXPECT_EQ(LargestDifference(ReadPly(store_ / plain / "mesh_raw.ply"), plain_mesh), 0.0);
+  // Masks from another folder (--masks DIR, sent as JobSpec.masks_dir): the same job.
+  fs::rename(data / "masks", tmp_.path() / "masks_elsewhere");
+  const std::string elsewhere = FirstLine(Sh(kBin + "lfrecon -q submit --ingest " + ing_ + " --aggregate " + agg_ +
+                                             " --dataset " + data.string() + " --masks " +
+                                             (tmp_.path() / "masks_elsewhere").string() + voxel + " --wait --wait-s 300"));
+  ASSERT_TRUE(JobStore::ValidJobId(elsewhere)) << elsewhere;
+  EXPECT_EQ(Status(elsewhere).masked_views(), static_cast<unsigned>(masked));
+  EXPECT_EQ(LargestDifference(ReadPly(store_ / elsewhere / "mesh_raw.ply"), run_mesh), 0.0) << "submit --masks";
 }
 
 // A pushed frame whose mask does not fit its camera, or is not PNG, is refused
