@@ -6,6 +6,9 @@
 //   fusion_from_depth_bench DATASET DEPTH_OUT [--sigma-s 0.1,0.15,0.2] [--voxel-mm 2] [--activation-min-confidence 0.01]
 //       [--refine 1] [--analyze 1] [--keep-mesh DIR]   (run without options for all of them)
 //   fusion_from_depth_bench DATASET - --mesh MESH.ply   (scores and analyses one mesh: where its error lies)
+//   fusion_from_depth_bench DATASET DEPTH_OUT --probability-clamp 0.03 --geo-consistency 2/4/8/16,4,0.01
+//       (diagnosis: drop the foreground depths that fewer than 4 of the maps 2, 4, 8, 16 before and after
+//        agree with within 1 %, then fuse; docs/benchmarks.md "Multi-view geometric consistency")
 //   fusion_from_depth_bench DATASET DEPTH_OUT --probability-clamp 0.03 --score 0 [--max-views N] [--keep-mesh DIR]
 //       (the cost of fusion alone with `lfrecon run`'s fusion options: Integrate and ExtractMesh timed per phase,
 //        no scoring; N: every k-th map so that at most N are fused. Under valgrind, count only the fusion with
@@ -23,6 +26,7 @@
 #include <cstdio>
 #include <limits>
 #include <memory>
+#include <mutex>
 #include <unordered_map>
 #include <cstdlib>
 #include <filesystem>
@@ -408,6 +412,7 @@ int main(int argc, char** argv) {
                  "  [--activation-min-confidence C] [--threshold H] [--band B] [--free-space-margin M] [--min-views N]\n"
                  "  [--refine cp,p,c (carve+Poisson, Poisson, carve+marching cubes)] [--carving-views N] [--consistency T]\n"
                  "  [--min-component-cm2 a,b,...] [--analyze 0|1]\n"
+                 "  [--geo-consistency O1/O2/...,MIN,TOL [--geo-radius R] [--geo-reproj PX] [--geo-soft 1]]\n"
                  "  [--keep-mesh DIR] [--mesh FILE.ply (analyse this mesh only; DEPTH_OUT may be -)]\n"
                  "  [--score 0 (time fusion only: no scoring)] [--max-views N] [--threads N]\n",
                  argv[0]);
@@ -435,6 +440,12 @@ int main(int argc, char** argv) {
   std::vector<Eigen::Vector3d> probes;
   int cons_views = 0;
   double cons_min = 0.4;
+  std::vector<int> geo_offsets;  // --geo-consistency: map-index offsets of the checking views
+  int geo_min_agree = 0;
+  double geo_tol = 0.01, geo_reproj_px = 0;
+  int geo_radius = 0;
+  bool geo_soft = false;
+  fs::path geo_spare_dir;  // filtered (§3.2) maps: pixels with a depth of their own there are not checked
   int cons_radius = DenseConsistencyOptions{}.patch_radius_px;
   for (int a = 3; a + 1 < argc; a += 2) {
     const std::string k = argv[a], v = argv[a + 1];
@@ -499,6 +510,20 @@ int main(int argc, char** argv) {
       }
     } else if (k == "--dense-consistency") {  // views,rho_min: CheckDenseConsistency on the loaded maps
       std::sscanf(v.c_str(), "%d,%lf,%d", &cons_views, &cons_min, &cons_radius);
+    } else if (k == "--geo-consistency") {  // O1/O2/..,MIN,TOL: multi-view depth agreement (diagnosis)
+      const auto c1 = v.find(',');
+      std::stringstream ss(v.substr(0, c1));
+      std::string item;
+      while (std::getline(ss, item, '/')) geo_offsets.push_back(std::atoi(item.c_str()));
+      if (c1 != std::string::npos) std::sscanf(v.c_str() + c1 + 1, "%d,%lf", &geo_min_agree, &geo_tol);
+    } else if (k == "--geo-radius") {  // look for agreement within R pixels of the projection
+      geo_radius = std::atoi(v.c_str());
+    } else if (k == "--geo-reproj") {  // agreement = back-projection within PX pixels (COLMAP-like), not TOL
+      geo_reproj_px = std::atof(v.c_str());
+    } else if (k == "--geo-spare-own") {  // DIR of `lfrecon depth --stage filtered`: own depths are not checked
+      geo_spare_dir = v;
+    } else if (k == "--geo-soft") {  // 1: scale the confidence by agreeing / MIN instead of dropping the depth
+      geo_soft = std::atoi(v.c_str()) != 0;
     } else if (k == "--oracle-clean") {  // diagnosis: keep only views with GT depth; drop depths off it by > MM
       oracle_clean_mm = std::atof(v.c_str());
     } else if (k == "--score") {
@@ -611,6 +636,92 @@ int main(int argc, char** argv) {
                 maps.size(), double(dropped_front) / std::max(1LL, total), double(dropped_behind) / std::max(1LL, total));
   }
   if (maps.empty()) return 1;
+  if (!geo_offsets.empty()) {
+    // Multi-view geometric consistency (diagnosis, not in the pipeline): a
+    // foreground depth (inside V) of map k is kept when at least MIN of the
+    // maps k +- o (o in the offsets, in map order) see the same point: their
+    // depth within R pixels of its projection is within TOL (relative) of the
+    // point's depth in them, or (--geo-reproj) back-projects into map k within
+    // PX pixels. Offsets are map indices: choose them for the set's spacing.
+    Timer gt_timer;
+    std::vector<PinholeView> vs;
+    for (int id : ids) vs.push_back(ds.View(id));
+    std::vector<cv::Mat> out(maps.size());
+    long long fg = 0, dropped = 0;
+    long long spared = 0;
+    tbb::parallel_for(std::size_t{0}, maps.size(), [&](std::size_t k) {
+      out[k] = maps[k].depth.clone();
+      cv::Mat own;
+      if (!geo_spare_dir.empty()) {
+        const fs::path f = geo_spare_dir / "depth" / (fs::path(ds.views()[ids[k]].name).stem().string() + ".pfm");
+        if (fs::exists(f)) own = ReadPfm(f);
+      }
+      long long l_spared = 0;
+      long long l_fg = 0, l_drop = 0;
+      for (int r = 0; r < maps[k].depth.rows; ++r)
+        for (int c = 0; c < maps[k].depth.cols; ++c) {
+          const float d = maps[k].depth.at<float>(r, c);
+          if (!(d > 0)) continue;
+          const Eigen::Vector3d X = vs[k].Unproject(Eigen::Vector2d(c + 0.5, r + 0.5), d);
+          if (!ds.bbox().Contains(X)) continue;
+          ++l_fg;
+          if (!own.empty()) {
+            const float o = own.at<float>(r, c);
+            if (o > 0 && std::abs(o - d) < geo_tol * d) {
+              ++l_spared;
+              continue;
+            }
+          }
+          int agree = 0;
+          for (int o : geo_offsets)
+            for (int sgn : {-1, 1}) {
+              const long j = static_cast<long>(k) + sgn * o;
+              if (j < 0 || j >= static_cast<long>(maps.size())) continue;
+              Eigen::Vector2d px;
+              const double z = vs[j].Project(X, &px);
+              if (!(z > 0) || !vs[j].InImage(px)) continue;
+              const int pr = static_cast<int>(px.y()), pc = static_cast<int>(px.x());
+              bool ok = false;
+              for (int dr = -geo_radius; dr <= geo_radius && !ok; ++dr)
+                for (int dc = -geo_radius; dc <= geo_radius && !ok; ++dc) {
+                  const int rr = pr + dr, cc = pc + dc;
+                  if (rr < 0 || cc < 0 || rr >= maps[j].depth.rows || cc >= maps[j].depth.cols) continue;
+                  const float dd = maps[j].depth.at<float>(rr, cc);
+                  if (geo_reproj_px > 0) {  // COLMAP-like: back into view k within PX
+                    if (!(dd > 0)) continue;
+                    const Eigen::Vector3d Xj = vs[j].Unproject(Eigen::Vector2d(cc + 0.5, rr + 0.5), dd);
+                    Eigen::Vector2d back;
+                    const double zb = vs[k].Project(Xj, &back);
+                    ok = zb > 0 && (back - Eigen::Vector2d(c + 0.5, r + 0.5)).norm() <= geo_reproj_px;
+                  } else {
+                    ok = dd > 0 && std::abs(dd - z) < geo_tol * z;
+                  }
+                }
+              if (ok) ++agree;
+            }
+          if (agree >= geo_min_agree) continue;
+          ++l_drop;
+          if (geo_soft && !maps[k].confidence.empty())
+            maps[k].confidence.at<float>(r, c) *= float(agree) / geo_min_agree;
+          else
+            out[k].at<float>(r, c) = 0;
+        }
+      static std::mutex mu;
+      std::lock_guard<std::mutex> lock(mu);
+      fg += l_fg;
+      dropped += l_drop;
+      spared += l_spared;
+    });
+    for (std::size_t k = 0; k < maps.size(); ++k) {
+      if (!maps[k].confidence.empty()) maps[k].confidence.setTo(0, out[k] <= 0);
+      maps[k].depth = out[k];
+    }
+    std::printf("geometric consistency (min %d, tol %.3f, radius %d, reproj %.1f px%s): %.4f of %lld foreground depths "
+                "%s, %.1f s\n", geo_min_agree, geo_tol, geo_radius, geo_reproj_px, geo_soft ? ", soft" : "",
+                double(dropped) / std::max(1LL, fg), fg, geo_soft ? "down-weighted" : "dropped", gt_timer.Seconds());
+    if (!geo_spare_dir.empty())
+      std::printf("  %.4f spared: a filtered depth of their own within the tolerance\n", double(spared) / std::max(1LL, fg));
+  }
   if (cons_views > 0) {
     // The dense maps' foreground depths checked against the frames (as
     // DepthPropagator does after its filter, for maps written without it).
