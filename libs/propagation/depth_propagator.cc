@@ -38,6 +38,7 @@ PropagationOptions PaperPropagationOptions() {
   o.weight_by_depth_confidence = false;
   o.one_sided_silhouettes = false;
   o.silhouette_pixels_splat_only = false;
+  o.blocked_silhouettes_keep_depth = false;
   o.keep_edge_depths = false;
   o.filter_inverse_depth = false;
   o.consistency.views = 0;

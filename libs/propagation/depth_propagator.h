@@ -26,7 +26,8 @@
 //    over the same edge-aware kernel instead of the weighted average of eq. 10;
 //  * splat confidences are C± times the depth stage's own confidence;
 //  * at silhouette edges only the consistent side is splatted, and the edge
-//    pixel itself feeds the filter only through that splat;
+//    pixel itself feeds the filter only through that splat, unless two such
+//    pixels splat into each other (a part two pixels wide: they keep their depth);
 //  * pixels that had a depth keep it where their side wins;
 //  * the filter's spatial σ is a fraction of the image width, so maps at
 //    1280×720 propagate as far (in the scene) as at 640×360; the guide is the
@@ -105,21 +106,20 @@ struct PropagationOptions {
   // keep max(C+, C−), as §4.2).
   bool silhouette_pixels_splat_only = true;
   // ... except for two silhouette edge pixels of one label that splat into
-  // each other (ours, off by default): the two sides of a part two pixels
-  // wide. Their splats cannot land (edge pixels are not overwritten), so the
-  // part reaches the filter nowhere, the background's depth wins over it and
-  // fusion carves it (thin-degraded, 8 views: 71 % of the rod's pixels come out
-  // background, 59 % with this on). With it, such pixels keep their own depth
-  // with max(C+, C−), as §4.2 has it. Not on by default: a broader first
-  // version (every silhouette whose target is any edge pixel) raised thin
-  // recall on all six sets of the quality table (figurines 0.854 -> 0.884,
-  // figurines-noisy 0.785 -> 0.843, thin-degraded 0.452 -> 0.494) but put a
-  // sheet beside the degraded rod of tests/pipeline/thin_rod_test.cc (P@5
-  // 0.995 -> 0.915, bound 0.95: a textured background has edge pixels
-  // everywhere); this pair version gives that test P 0.966 / thin recall
-  // 0.397 (was 0.995 / 0.356) and has not been through the table yet
-  // (docs/benchmarks.md, "two propagation fixes").
-  bool blocked_silhouettes_keep_depth = false;
+  // each other (ours, on by default; PaperPropagationOptions turns it off):
+  // the two sides of a part two pixels wide. Their splats cannot land (edge
+  // pixels are not overwritten), so the part reaches the filter nowhere, the
+  // background's depth wins over it and fusion carves it (thin-degraded, 8
+  // views: 71 % of the rod's pixels come out background, 59 % with this on).
+  // With it, such pixels keep their own depth with max(C+, C−), as §4.2 has
+  // it. Quality table (docs/benchmarks.md, "two propagation fixes"): thin-degraded
+  // F@5 0.634 -> 0.659, thin recall 0.452 -> 0.482; tabletop thin recall
+  // 0.403 -> 0.397; the other four sets within 0.001 F@5. A broader version
+  // (every silhouette whose target is any edge pixel, even of another label or
+  // not pointing back) put a sheet beside the degraded rod of
+  // tests/pipeline/thin_rod_test.cc (P@5 0.915, bound 0.95: a textured
+  // background has edge pixels everywhere); this pair version gives 0.966.
+  bool blocked_silhouettes_keep_depth = true;
   // After the filter, each foreground depth is checked against the frames of
   // the widest-baseline neighbours (dense_consistency.h; ours: views = 0 turns it off).
   DenseConsistencyOptions consistency;

@@ -6,7 +6,7 @@
 //                     [--sigma-spatial F] [--sigma-color C] [--guide-sigma S] [--mode nc|ic|rf|own]
 //                     [--iterations N] [--min-confidence C] [--presmooth S] [--max-views N] [--model constant|affine]
 //                     [--ridge PX] [--extrapolation-m0 M] [--extrapolation-floor PX] [--paper] [--no-depth-confidence] [--no-keep-edge-depths]
-//                     [--no-inverse-depth] [--two-sided] [--no-silhouette-splat-only] [--keep-blocked-silhouettes] [--oracle-depth]
+//                     [--no-inverse-depth] [--two-sided] [--no-silhouette-splat-only] [--no-keep-blocked-silhouettes] [--oracle-depth]
 //                     [--upscale F] [--repeat R]
 // Options apply in order: --paper resets to PaperPropagationOptions(), later flags change it.
 // --upscale F scales frames (bicubic), the filtered maps and ground truth
@@ -64,7 +64,7 @@ int main(int argc, char** argv) {
                  "       [--min-confidence C] [--presmooth S] [--max-views N] [--model constant|affine] [--ridge PX]\n"
                  "       [--extrapolation-m0 M] [--extrapolation-floor PX]\n"
                  "       [--paper] [--no-depth-confidence] [--no-keep-edge-depths] [--no-inverse-depth] [--two-sided]\n"
-                 "       [--no-silhouette-splat-only] [--keep-blocked-silhouettes] [--oracle-depth] [--upscale F] [--repeat R]\n",
+                 "       [--no-silhouette-splat-only] [--no-keep-blocked-silhouettes] [--oracle-depth] [--upscale F] [--repeat R]\n",
                  argv[0]);
     return 2;
   }
@@ -118,7 +118,7 @@ int main(int argc, char** argv) {
     else if (is("--ncc-min")) popt.consistency.ncc_min = std::atof(argv[++a]);
     else if (is("--ncc-texture-min")) popt.consistency.ncc_texture_min = std::atof(argv[++a]);
     else if (!std::strcmp(argv[a], "--no-silhouette-splat-only")) popt.silhouette_pixels_splat_only = false;
-    else if (!std::strcmp(argv[a], "--keep-blocked-silhouettes")) popt.blocked_silhouettes_keep_depth = true;
+    else if (!std::strcmp(argv[a], "--no-keep-blocked-silhouettes")) popt.blocked_silhouettes_keep_depth = false;
     else if (is("--ridge")) popt.affine_ridge_px = std::atof(argv[++a]);
     else if (is("--extrapolation-m0")) popt.extrapolation_m0 = std::atof(argv[++a]);
     else if (is("--extrapolation-floor")) popt.extrapolation_floor_px = std::atof(argv[++a]);
