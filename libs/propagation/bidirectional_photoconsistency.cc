@@ -145,6 +145,7 @@ void PhotoconsistencyAccumulator::Begin(const ViewImage& reference, const DepthM
   out_.c_minus = cv::Mat::zeros(rows, cols, CV_32F);
   out_.direction = cv::Mat::zeros(rows, cols, CV_32FC2);
   out_.evaluated = cv::Mat::zeros(rows, cols, CV_8U);
+  if (o.centre_consistency) out_.c_centre = cv::Mat::zeros(rows, cols, CV_32F);
   pixels_.clear();
   samples_.clear();
   added_ = 0;
@@ -160,7 +161,7 @@ void PhotoconsistencyAccumulator::Begin(const ViewImage& reference, const DepthM
 
   const int S = o.samples_per_side;
   const float step_px = static_cast<float>(o.sample_step_px);
-  std::vector<Eigen::Vector3f> f(2 * S);  // f+ then f−
+  std::vector<Eigen::Vector3f> f(2 * S + 3);  // f+ then f−, then C0's samples along the edge
   for (int r = 0; r < rows; ++r) {
     const float* drow = depth.depth.ptr<float>(r);
     const cv::Vec2f* dir = out_.direction.ptr<cv::Vec2f>(r);
@@ -189,9 +190,20 @@ void PhotoconsistencyAccumulator::Begin(const ViewImage& reference, const DepthM
         }
       }
       if (!px.side_ok[0] && !px.side_ok[1]) continue;
+      if (o.centre_consistency) {  // p − t, p, p + t with t ⊥ θ(p)
+        const Eigen::Vector2f t(-step.y(), step.x());
+        px.centre_ok = true;
+        for (int k = -1; k <= 1 && px.centre_ok; ++k) {
+          const Eigen::Vector2f x = p + static_cast<float>(k) * t;
+          px.centre_ok = SampleBgr(ref_img, x.x(), x.y(), &f[2 * S + k + 1]);
+        }
+      }
       pixels_.push_back(px);
       for (int k = 0; k < 2 * S; ++k)
         for (int ch = 0; ch < 3; ++ch) samples_.push_back(px.side_ok[k / S] ? f[k][ch] : 0.0f);
+      if (o.centre_consistency)
+        for (int k = 0; k < 3; ++k)
+          for (int ch = 0; ch < 3; ++ch) samples_.push_back(px.centre_ok ? f[2 * S + k][ch] : 0.0f);
     }
   }
 }
@@ -214,7 +226,8 @@ void PhotoconsistencyAccumulator::Add(const ViewImage& neighbor) {
   const int S = o.samples_per_side;
   // exp(−‖f − g‖² / (2σ_p²)) (eq. 9), ‖·‖² per sample pixel (see header).
   const float inv_two_sigma2 = static_cast<float>(1.0 / (2.0 * o.sigma_p * o.sigma_p * S));
-  const std::size_t per_pixel = static_cast<std::size_t>(6 * S);
+  const std::size_t per_pixel = static_cast<std::size_t>(6 * S + (o.centre_consistency ? 9 : 0));
+  const float inv_two_sigma2_centre = static_cast<float>(1.0 / (2.0 * o.sigma_p * o.sigma_p * 3));
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, pixels_.size(), 256),
                     [&](const tbb::blocked_range<std::size_t>& range) {
     for (std::size_t i = range.begin(); i != range.end(); ++i) {
@@ -243,6 +256,25 @@ void PhotoconsistencyAccumulator::Add(const ViewImage& neighbor) {
         px.sum_rho[side] += std::exp(-ssd * inv_two_sigma2);
         ++px.count[side];
       }
+      if (px.centre_ok) {
+        const Eigen::Vector3f dt = d * (pair.A.leftCols<2>() * Eigen::Vector2f(-px.sy, px.sx));
+        float ssd = 0;
+        bool ok = true;
+        for (int k = -1; k <= 1; ++k) {
+          const Eigen::Vector3f y = y0 + static_cast<float>(k) * dt;
+          Eigen::Vector3f g;
+          if (!(y.z() > 0) || !SampleBgr(image, y.x() / y.z(), y.y() / y.z(), &g)) {
+            ok = false;
+            break;
+          }
+          const float* fk = fs + 6 * S + 3 * (k + 1);
+          ssd += (Eigen::Vector3f(fk[0], fk[1], fk[2]) - g).squaredNorm();
+        }
+        if (ok) {
+          px.sum_centre += std::exp(-ssd * inv_two_sigma2_centre);
+          ++px.count_centre;
+        }
+      }
     }
   });
 }
@@ -256,6 +288,8 @@ EdgeConsistency PhotoconsistencyAccumulator::Finish() {
       // C+(p), C−(p): averages over the views (§4.1).
       out_.c_plus.at<float>(px.row, px.col) = px.count[0] ? px.sum_rho[0] / px.count[0] : 0.0f;
       out_.c_minus.at<float>(px.row, px.col) = px.count[1] ? px.sum_rho[1] / px.count[1] : 0.0f;
+      if (!out_.c_centre.empty())
+        out_.c_centre.at<float>(px.row, px.col) = px.count_centre ? px.sum_centre / px.count_centre : 0.0f;
     }
   }
   EdgeConsistency result = std::move(out_);

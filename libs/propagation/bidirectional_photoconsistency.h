@@ -47,6 +47,18 @@ struct PhotoconsistencyOptions {
   // ViewImage carries `smoothed` (the depth stage fills it with the same
   // 0.65 px Gaussian), that image is used instead of smoothing again.
   double presmooth_sigma = 0.65;
+  // Also compute C0(p) (ours, off by default): ρ of three samples *along* the
+  // edge (p and p ± one step perpendicular to θ(p)) through the same plane.
+  // On a part one or two pixels wide both sides of the edge are background,
+  // so C+ and C− are low at the part's own depth while C0 is high; the
+  // propagation (DepthPropagator) then keeps such a pixel's depth where C0
+  // beats max(C+, C−) by the silhouette ratio. Off: on thin-degraded (8 views,
+  // dense_depth_bench --centre-consistency) the rod's pixels labelled
+  // background fall 59 % -> 36 %, but tests/pipeline/thin_rod_test.cc's
+  // degraded rod loses precision (P@5 0.966 -> 0.920, bound 0.95; thin
+  // recall 0.397 -> 0.446): along a textureless rod C0 also holds for wrong
+  // depths (docs/benchmarks.md, "Consistency along the edge").
+  bool centre_consistency = false;
 
   void Check() const;  // throws OptionError
 };
@@ -65,6 +77,7 @@ struct EdgeConsistency {
   cv::Mat c_minus;    // CV_32F, C−(p) in [0, 1]; 0 where not evaluated
   cv::Mat direction;  // CV_32FC2, unit image-gradient direction (cos θ, sin θ); (0, 0) where none
   cv::Mat evaluated;  // CV_8U, 255 where C± were computed (the pixel has depth and a gradient direction)
+  cv::Mat c_centre;   // CV_32F, C0(p) (PhotoconsistencyOptions::centre_consistency); empty when off
 
   // |C+ − C−| / (C+ + C−) (CV_32F; 0 where not evaluated or C+ + C− == 0).
   cv::Mat SilhouetteRatio() const;
@@ -128,12 +141,15 @@ class PhotoconsistencyAccumulator {
     bool side_ok[2] = {true, true};
     float sum_rho[2] = {0, 0};
     int count[2] = {0, 0};
+    bool centre_ok = false;  // C0's samples inside the reference (centre_consistency)
+    float sum_centre = 0;
+    int count_centre = 0;
   };
   PhotoconsistencyOptions options_;
   PinholeView reference_view_;
   EdgeConsistency out_;
   std::vector<Pixel> pixels_;
-  std::vector<float> samples_;  // f+ then f−, 3·2·samples_per_side floats per pixel
+  std::vector<float> samples_;  // f+ then f− (3·2·samples_per_side floats per pixel), then C0's 9 when on
   bool valid_ = false;
   int added_ = 0;
 };

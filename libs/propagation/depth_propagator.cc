@@ -95,6 +95,7 @@ SplatMaps DepthPropagator::Splat(const DepthMap& filtered, const EdgeConsistency
         if (is_edge(r, c)) is_edge_map.at<std::uint8_t>(r, c) = 1;
   });
   const bool keep_blocked = options_.blocked_silhouettes_keep_depth;
+  const bool has_centre = edges.c_centre.size() == filtered.depth.size() && edges.c_centre.type() == CV_32F;
   // The pixel a silhouette edge pixel splats to (its consistent side).
   const auto consistent_target = [&](int r, int c) {
     const cv::Point step = NeighborStep(edges.direction.at<cv::Vec2f>(r, c));
@@ -131,6 +132,15 @@ SplatMaps DepthPropagator::Splat(const DepthMap& filtered, const EdgeConsistency
         // its own depth, else the part would reach the filter nowhere.
         if (silhouette_splat_only && std::abs(cp - cm) > ratio * (cp + cm)) {
           if (!(keep_blocked && silhouette_pair(r, c))) conf = 0;
+        }
+        // A part one or two pixels wide (PhotoconsistencyOptions::centre_consistency):
+        // its depth holds along the edge (C0) better than on either side of
+        // it, which both see what lies behind; it keeps its depth with C0.
+        if (has_centre) {
+          const float c0 = edges.c_centre.at<float>(r, c);
+          const float side = std::max(cp, cm);
+          // Clearly better along than across, by the silhouette test's own ratio (Fig. 4).
+          if (c0 - side > ratio * (c0 + side)) conf = scale(r, c) * c0;
         }
         if (!(conf > 0)) continue;
         (l == kFg ? s.depth_fg : s.depth_bg).at<float>(r, c) = d;

@@ -4,7 +4,7 @@
 // and time per view with where it goes.
 //   dense_depth_bench DATASET [--gt-views N] [--skip K] [--stride S] [--threads T] [--preview-dir DIR] [--cache DIR]
 //                     [--sigma-spatial F] [--sigma-color C] [--guide-sigma S] [--mode nc|ic|rf|own]
-//                     [--iterations N] [--min-confidence C] [--presmooth S] [--max-views N] [--model constant|affine]
+//                     [--iterations N] [--min-confidence C] [--presmooth S] [--max-views N] [--[no-]centre-consistency] [--model constant|affine]
 //                     [--ridge PX] [--extrapolation-m0 M] [--extrapolation-floor PX] [--paper] [--no-depth-confidence] [--no-keep-edge-depths]
 //                     [--no-inverse-depth] [--two-sided] [--no-silhouette-splat-only] [--no-keep-blocked-silhouettes] [--oracle-depth]
 //                     [--upscale F] [--repeat R]
@@ -94,6 +94,8 @@ int main(int argc, char** argv) {
     else if (is("--min-confidence")) popt.min_filtered_confidence = std::atof(argv[++a]);
     else if (is("--upscale")) upscale = std::max(1, std::atoi(argv[++a]));
     else if (is("--max-views")) popt.photo.max_views = std::atoi(argv[++a]);
+    else if (!std::strcmp(argv[a], "--centre-consistency")) popt.photo.centre_consistency = true;
+    else if (!std::strcmp(argv[a], "--no-centre-consistency")) popt.photo.centre_consistency = false;
     else if (is("--presmooth")) popt.photo.presmooth_sigma = std::atof(argv[++a]);
     else if (is("--mode")) {
       const std::string m = argv[++a];
