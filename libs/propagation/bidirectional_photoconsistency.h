@@ -51,13 +51,13 @@ struct PhotoconsistencyOptions {
   // edge (p and p ± one step perpendicular to θ(p)) through the same plane.
   // On a part one or two pixels wide both sides of the edge are background,
   // so C+ and C− are low at the part's own depth while C0 is high; the
-  // propagation (DepthPropagator) then keeps such a pixel's depth where C0
-  // beats max(C+, C−) by the silhouette ratio. Off: on thin-degraded (8 views,
-  // dense_depth_bench --centre-consistency) the rod's pixels labelled
-  // background fall 59 % -> 36 %, but tests/pipeline/thin_rod_test.cc's
-  // degraded rod loses precision (P@5 0.966 -> 0.920, bound 0.95; thin
-  // recall 0.397 -> 0.446): along a textureless rod C0 also holds for wrong
-  // depths (docs/benchmarks.md, "Consistency along the edge").
+  // propagation (DepthPropagator) then keeps a foreground pixel's depth and
+  // side after the filter, with confidence C0, where C0 beats max(C+, C−) by
+  // the silhouette ratio (it is not fed to the filter: as a source it spread
+  // the part over its neighbours). Off: tests/pipeline/thin_rod_test.cc's
+  // degraded rod gets thin recall 0.397 -> 0.608 but P@5 0.966 -> 0.902
+  // (bound 0.95): the rod's noisy depths thicken it along the viewing
+  // direction (docs/benchmarks.md, "Consistency along the edge").
   bool centre_consistency = false;
 
   void Check() const;  // throws OptionError

@@ -96,6 +96,7 @@ SplatMaps DepthPropagator::Splat(const DepthMap& filtered, const EdgeConsistency
   });
   const bool keep_blocked = options_.blocked_silhouettes_keep_depth;
   const bool has_centre = edges.c_centre.size() == filtered.depth.size() && edges.c_centre.type() == CV_32F;
+  if (has_centre) s.thin_confidence = cv::Mat::zeros(rows, cols, CV_32F);
   // The pixel a silhouette edge pixel splats to (its consistent side).
   const auto consistent_target = [&](int r, int c) {
     const cv::Point step = NeighborStep(edges.direction.at<cv::Vec2f>(r, c));
@@ -139,8 +140,10 @@ SplatMaps DepthPropagator::Splat(const DepthMap& filtered, const EdgeConsistency
         if (has_centre) {
           const float c0 = edges.c_centre.at<float>(r, c);
           const float side = std::max(cp, cm);
-          // Clearly better along than across, by the silhouette test's own ratio (Fig. 4).
-          if (c0 - side > ratio * (c0 + side)) conf = scale(r, c) * c0;
+          // Clearly better along than across, by the silhouette test's own
+          // ratio (Fig. 4). Kept after the filter, not fed to it: as a source
+          // it would spread the part's depth over the pixels beside it.
+          if (l == kFg && c0 - side > ratio * (c0 + side)) s.thin_confidence.at<float>(r, c) = scale(r, c) * c0;
         }
         if (!(conf > 0)) continue;
         (l == kFg ? s.depth_fg : s.depth_bg).at<float>(r, c) = d;
@@ -280,6 +283,8 @@ DepthMap DepthPropagator::Filter(const cv::Mat& image, const SplatMaps& splats) 
   // Ridge on the slopes of the affine fit, in (u, v) units (see the options).
   const float ridge = static_cast<float>(std::pow(o.affine_ridge_px / scale, 2));
   const bool extrap_on = affine && o.extrapolation_m0 > 0;
+  const bool has_thin = splats.thin_confidence.size() == splats.edge_depth.size() &&
+                        splats.thin_confidence.type() == CV_32F;
   const double floor2 = std::pow(o.extrapolation_floor_px / scale, 2);
   tbb::parallel_for(tbb::blocked_range<int>(0, rows), [&](const tbb::blocked_range<int>& range) {
     for (int r = range.begin(); r != range.end(); ++r) {
@@ -288,7 +293,14 @@ DepthMap DepthPropagator::Filter(const cv::Mat& image, const SplatMaps& splats) 
       float* conf = out.confidence.ptr<float>(r);
       std::uint8_t* label = out.label.ptr<std::uint8_t>(r);
       const float vq = V(r);
+      const float* thin = has_thin ? splats.thin_confidence.ptr<float>(r) : nullptr;
       for (int c = 0; c < cols; ++c, f += n) {
+        if (thin && thin[c] > 0) {  // a part one or two pixels wide keeps its own depth and side
+          depth[c] = splats.edge_depth.at<float>(r, c);
+          conf[c] = thin[c];
+          label[c] = splats.edge_label.at<std::uint8_t>(r, c);
+          continue;
+        }
         float cfg = std::max(0.0f, f[affine ? 0 : 1]);
         const float cbg = std::max(0.0f, f[bg0 + 1]);
         // The foreground fit's moments (kAffine), for the extrapolation test and the plane.

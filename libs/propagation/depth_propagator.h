@@ -159,6 +159,9 @@ struct SplatMaps {
   cv::Mat depth_bg, confidence_bg;
   cv::Mat edge_label;  // CV_8U: the DepthLabel of edge pixels (which keep their own depth), 0 elsewhere
   cv::Mat edge_depth;  // CV_32F: the depth of edge pixels, 0 elsewhere
+  // CV_32F: C0 of edge pixels that keep their own depth and side after the
+  // filter (PhotoconsistencyOptions::centre_consistency); empty when off.
+  cv::Mat thin_confidence;
 
   // All maps rows × cols and zero.
   static SplatMaps Zeros(int rows, int cols);

@@ -303,6 +303,64 @@ TEST(DepthPropagator, ARodTwoPixelsWideKeepsItsDepthWhereItsSplatsCannotLand) {
   EXPECT_FLOAT_EQ(s1.confidence_fg.at<float>(10, 21), 0.9f);
 }
 
+TEST(DepthPropagator, ARodOnePixelWideKeepsItsDepthWhereItHoldsAlongTheEdge) {
+  // A vertical rod one pixel wide (column 20) before a background with texture
+  // edges every 5 px: both sides of the rod see the background, so C+ and C−
+  // are low at its depth (0.02, 0.1) and it loses to the background; C0 along
+  // the rod (PhotoconsistencyOptions::centre_consistency) is 0.8, and the rod
+  // keeps its own depth and side after the filter without spreading to its
+  // neighbours. A background-labelled pixel that passes the same test is left
+  // to the filter (the rule serves foreground parts).
+  const int rows = 40, cols = 40;
+  cv::Mat image(rows, cols, CV_32FC3, cv::Scalar(0.5, 0.5, 0.5));
+  DepthMap m(rows, cols);
+  EdgeConsistency e;
+  e.c_plus = cv::Mat::zeros(rows, cols, CV_32F);
+  e.c_minus = cv::Mat::zeros(rows, cols, CV_32F);
+  e.c_centre = cv::Mat::zeros(rows, cols, CV_32F);
+  e.direction = cv::Mat::zeros(rows, cols, CV_32FC2);
+  e.evaluated = cv::Mat::zeros(rows, cols, CV_8U);
+  const auto edge = [&](int r, int c, float d, std::uint8_t label, float cp, float cm, float c0) {
+    m.depth.at<float>(r, c) = d;
+    m.confidence.at<float>(r, c) = 1.0f;
+    m.label.at<std::uint8_t>(r, c) = label;
+    e.c_plus.at<float>(r, c) = cp;
+    e.c_minus.at<float>(r, c) = cm;
+    e.c_centre.at<float>(r, c) = c0;
+    e.direction.at<cv::Vec2f>(r, c) = {1, 0};
+    e.evaluated.at<std::uint8_t>(r, c) = 255;
+  };
+  for (int r = 0; r < rows; ++r) {
+    image.at<cv::Vec3f>(r, 20) = cv::Vec3f(0.1f, 0.1f, 0.1f);
+    edge(r, 20, 0.6f, kFg, 0.02f, 0.1f, 0.8f);  // a silhouette (ratio 0.67): it feeds the filter only through its splat
+    for (int c = 2; c < cols; c += 5)
+      if (c < 18 || c > 22) edge(r, c, 2.0f, kBg, 0.8f, 0.8f, 0.8f);  // texture: C0 does not beat the sides
+  }
+  edge(5, 32, 2.5f, kBg, 0.1f, 0.1f, 0.9f);  // a background pixel that passes the test
+  const DepthPropagator propagator{PropagationOptions{}};
+  const SplatMaps splats = propagator.Splat(m, e);
+  ASSERT_EQ(splats.thin_confidence.size(), m.depth.size());
+  EXPECT_FLOAT_EQ(splats.thin_confidence.at<float>(10, 20), 0.8f);
+  EXPECT_FLOAT_EQ(splats.thin_confidence.at<float>(10, 17), 0.0f);  // texture
+  EXPECT_FLOAT_EQ(splats.thin_confidence.at<float>(5, 32), 0.0f);   // background-labelled
+  // Without C0 (the default photoconsistency leaves c_centre empty).
+  EdgeConsistency without = e;
+  without.c_centre = cv::Mat();
+  const DepthMap dense = propagator.Filter(image, splats);
+  const DepthMap plain = propagator.Filter(image, propagator.Splat(m, without));
+  const auto count = [&](const DepthMap& d, int col, bool own_depth) {
+    int n = 0;
+    for (int r = 0; r < rows; ++r)
+      n += d.label.at<std::uint8_t>(r, col) == kFg && (!own_depth || std::abs(d.depth.at<float>(r, col) - 0.6f) < 1e-6f);
+    return n;
+  };
+  EXPECT_EQ(count(dense, 20, true), rows);
+  for (int r = 0; r < rows; ++r) EXPECT_FLOAT_EQ(dense.confidence.at<float>(r, 20), 0.8f) << r;
+  EXPECT_LT(count(plain, 20, true), rows / 2);
+  // Nothing spreads from it: the pixels beside the rod are as they are without C0.
+  for (int c : {18, 19, 21, 22}) EXPECT_EQ(count(dense, c, false), count(plain, c, false)) << c;
+}
+
 TEST(DepthPropagator, FilterReproducesAPlaneFromItsEdgesAndKeepsSidesApart) {
   // Inverse depth affine in the pixel coordinates (a plane) on a frame of
   // foreground pixels around a flat 60×60 square, and a background square to its right.
