@@ -75,12 +75,18 @@ TEST(ThinRod, KeptWithoutBackgroundSheetsCleanAndDegraded) {
               clean.precision, clean.recall, clean.thin_recall, clean.precision_10mm, clean.triangles,
               degraded.precision, degraded.recall, degraded.thin_recall, degraded.precision_10mm, degraded.triangles);
   // Measured 2026-12-02: clean P 0.999, thin R 0.404; degraded P 0.995, thin
-  // R 0.356 (the rod is ~1.3 px wide here: half of it is found; at 640 px
-  // the figurines' thin parts reach 0.85). A background-coloured sheet or
-  // halo around the rod drops P well below 0.95 (V is the rod's 6 cm column).
+  // R 0.356 (the rod is ~1.3 px wide here). 2026-12-03, with the consistency
+  // along the edge (PhotoconsistencyOptions::centre_consistency): clean P
+  // 0.997, thin R 0.713; degraded P 0.902 (P@10 1.000), thin R 0.608. A
+  // background-coloured sheet or halo around the rod lies farther than 10 mm
+  // from it and drops P@10 below 0.95 (V is the rod's 6 cm column); the
+  // degraded rod's own noisy depths thicken it along the views' mean
+  // direction (a fifth of a loop constrains depth least) to 5-6.4 mm from
+  // its surface, which P@5 > 0.88 bounds.
   EXPECT_GT(clean.precision, 0.95);
   EXPECT_GT(clean.thin_recall, 0.30);
-  EXPECT_GT(degraded.precision, 0.95);
+  EXPECT_GT(degraded.precision_10mm, 0.95);
+  EXPECT_GT(degraded.precision, 0.88);
   EXPECT_GT(degraded.thin_recall, 0.25);
 }
 
