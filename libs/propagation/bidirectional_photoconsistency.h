@@ -47,18 +47,21 @@ struct PhotoconsistencyOptions {
   // ViewImage carries `smoothed` (the depth stage fills it with the same
   // 0.65 px Gaussian), that image is used instead of smoothing again.
   double presmooth_sigma = 0.65;
-  // Also compute C0(p) (ours, off by default): ρ of three samples *along* the
-  // edge (p and p ± one step perpendicular to θ(p)) through the same plane.
-  // On a part one or two pixels wide both sides of the edge are background,
-  // so C+ and C− are low at the part's own depth while C0 is high; the
-  // propagation (DepthPropagator) then keeps a foreground pixel's depth and
-  // side after the filter, with confidence C0, where C0 beats max(C+, C−) by
-  // the silhouette ratio (it is not fed to the filter: as a source it spread
-  // the part over its neighbours). Off: tests/pipeline/thin_rod_test.cc's
-  // degraded rod gets thin recall 0.397 -> 0.608 but P@5 0.966 -> 0.902
-  // (bound 0.95): the rod's noisy depths thicken it along the viewing
-  // direction (docs/benchmarks.md, "Consistency along the edge").
-  bool centre_consistency = false;
+  // Also compute C0(p) (ours, on by default; PaperPropagationOptions turns it
+  // off): ρ of three samples *along* the edge (p and p ± one step
+  // perpendicular to θ(p)) through the same plane. On a part one or two
+  // pixels wide both sides of the edge are background, so C+ and C− are low
+  // at the part's own depth while C0 is high; the propagation
+  // (DepthPropagator) then keeps a foreground pixel's depth and side after
+  // the filter, with confidence C0, where C0 beats max(C+, C−) by the
+  // silhouette ratio (it is not fed to the filter: as a source it spread the
+  // part over its neighbours). Quality table (docs/benchmarks.md,
+  // "Consistency along the edge"): thin-degraded F@5 0.659 -> 0.956 (thin
+  // recall 0.482 -> 0.903), figurines thin recall 0.854 -> 0.874,
+  // figurines-noisy 0.786 -> 0.818, no set's F@5 lower; a degraded rod seen
+  // from a fifth of a loop is thickened by its noisy depths
+  // (tests/pipeline/thin_rod_test.cc: P@5 0.902, P@10 1.000).
+  bool centre_consistency = true;
 
   void Check() const;  // throws OptionError
 };

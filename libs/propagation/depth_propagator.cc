@@ -42,6 +42,7 @@ PropagationOptions PaperPropagationOptions() {
   o.keep_edge_depths = false;
   o.filter_inverse_depth = false;
   o.consistency.views = 0;
+  o.photo.centre_consistency = false;
   o.extrapolation_m0 = 0;
   return o;
 }

@@ -39,7 +39,6 @@ struct RunArgs {
   bool no_refine_poses = false;
   bool no_mask_free_space = false;
   bool mask_carving = false;
-  bool centre_consistency = false;
   RunOutputFlags outputs;  // mesh formats, point cloud, COLMAP workspace, report.html
   bool all_views = false;
   std::optional<int> max_frame_gap;
@@ -117,7 +116,6 @@ int RunPipeline(const RunArgs& args) {
     if (!args.out.empty()) WriteRefinedModel(ds, views, args.out / "sparse_refined");
   }
   if (args.mask_carving) options.refine_options.carving.carve_outside_masks = true;
-  if (args.centre_consistency) options.propagation.photo.centre_consistency = true;
   options.preview_views = args.outputs.previews;
   EmbeddedPipeline pipeline(views, ds.bbox(), options, names);
   const bool mask_free_space = options.mask_free_space.confidence > 0;
@@ -186,10 +184,6 @@ void AddRunCommand(CLI::App& root, int* exit_code) {
                 "With masks: also carve the fused voxels that lie outside a carving frame's mask (more than 2 px "
                 "and the voxel's own size from its object) before the photo-consistency carving. Off by default: "
                 "masks that miss thin parts lose them (docs/benchmarks.md)");
-  cmd->add_flag("--centre-consistency", args->centre_consistency,
-                "Densification (§4): an edge pixel whose depth holds along the edge better than on either side "
-                "of it (a part one or two pixels wide) keeps it. Off by default: it keeps more of thin parts but "
-                "lost precision beside a degraded rod (docs/benchmarks.md, \"Consistency along the edge\")");
   cmd->add_option("--color-views", args->color_views, "Frames kept to colour the mesh (0: none)")->capture_default_str();
   cmd->callback([args, exit_code] { *exit_code = RunPipeline(*args); });
 }

@@ -222,8 +222,10 @@ TEST(BidirectionalPhotoconsistency, CentreConsistencyHoldsOnThinPartsNotBesideTh
   ASSERT_GT(thin, 50);
   EXPECT_GT(thin_rate, 0.2);
   EXPECT_LT(texture_rate, 0.01);
-  // Off by default: no C0 map.
-  EXPECT_TRUE(BidirectionalPhotoconsistency(PhotoconsistencyOptions{}).Compute(v.ref, v.NeighborPtrs(), at).c_centre.empty());
+  // Off: no C0 map.
+  PhotoconsistencyOptions off;
+  off.centre_consistency = false;
+  EXPECT_TRUE(BidirectionalPhotoconsistency(off).Compute(v.ref, v.NeighborPtrs(), at).c_centre.empty());
 }
 
 TEST(BidirectionalPhotoconsistency, RatioAndClassesFollowTheDefinition) {

@@ -343,7 +343,7 @@ TEST(DepthPropagator, ARodOnePixelWideKeepsItsDepthWhereItHoldsAlongTheEdge) {
   EXPECT_FLOAT_EQ(splats.thin_confidence.at<float>(10, 20), 0.8f);
   EXPECT_FLOAT_EQ(splats.thin_confidence.at<float>(10, 17), 0.0f);  // texture
   EXPECT_FLOAT_EQ(splats.thin_confidence.at<float>(5, 32), 0.0f);   // background-labelled
-  // Without C0 (the default photoconsistency leaves c_centre empty).
+  // Without C0 (photoconsistency with centre_consistency off leaves c_centre empty).
   EdgeConsistency without = e;
   without.c_centre = cv::Mat();
   const DepthMap dense = propagator.Filter(image, splats);
