@@ -246,26 +246,41 @@ TEST(DepthPropagator, SplatGoesToTheConsistentSideAndTheStrongestWins) {
   }
 }
 
+// Hand-made inputs of Splat: a filtered map and its edges' C± (and C0 when
+// `centre` is set), every edge pixel's gradient along +x.
+struct EdgeMaps {
+  DepthMap map;
+  EdgeConsistency edges;
+  EdgeMaps(int rows, int cols, bool centre) : map(rows, cols) {
+    edges.c_plus = cv::Mat::zeros(rows, cols, CV_32F);
+    edges.c_minus = cv::Mat::zeros(rows, cols, CV_32F);
+    if (centre) edges.c_centre = cv::Mat::zeros(rows, cols, CV_32F);
+    edges.direction = cv::Mat::zeros(rows, cols, CV_32FC2);
+    edges.evaluated = cv::Mat::zeros(rows, cols, CV_8U);
+  }
+  void Edge(int r, int c, float d, std::uint8_t label, float cp, float cm, float c0 = 0) {
+    map.depth.at<float>(r, c) = d;
+    map.confidence.at<float>(r, c) = 1.0f;
+    map.label.at<std::uint8_t>(r, c) = label;
+    edges.c_plus.at<float>(r, c) = cp;
+    edges.c_minus.at<float>(r, c) = cm;
+    if (!edges.c_centre.empty()) edges.c_centre.at<float>(r, c) = c0;
+    edges.direction.at<cv::Vec2f>(r, c) = {1, 0};
+    edges.evaluated.at<std::uint8_t>(r, c) = 255;
+  }
+};
+
 TEST(DepthPropagator, ARodTwoPixelsWideKeepsItsDepthWhereItsSplatsCannotLand) {
   // A vertical rod two pixels wide (columns 20 and 21) before a background
   // with texture edges every 5 px: each rod pixel is a silhouette edge whose
   // consistent side is the other rod pixel, an edge pixel too.
   const int rows = 40, cols = 40;
   cv::Mat image(rows, cols, CV_32FC3, cv::Scalar(0.5, 0.5, 0.5));
-  DepthMap m(rows, cols);
-  EdgeConsistency e;
-  e.c_plus = cv::Mat::zeros(rows, cols, CV_32F);
-  e.c_minus = cv::Mat::zeros(rows, cols, CV_32F);
-  e.direction = cv::Mat::zeros(rows, cols, CV_32FC2);
-  e.evaluated = cv::Mat::zeros(rows, cols, CV_8U);
+  EdgeMaps in(rows, cols, false);
+  const DepthMap& m = in.map;
+  const EdgeConsistency& e = in.edges;
   const auto edge = [&](int r, int c, float d, std::uint8_t label, float cp, float cm) {
-    m.depth.at<float>(r, c) = d;
-    m.confidence.at<float>(r, c) = 1.0f;
-    m.label.at<std::uint8_t>(r, c) = label;
-    e.c_plus.at<float>(r, c) = cp;
-    e.c_minus.at<float>(r, c) = cm;
-    e.direction.at<cv::Vec2f>(r, c) = {1, 0};
-    e.evaluated.at<std::uint8_t>(r, c) = 255;
+    in.Edge(r, c, d, label, cp, cm);
   };
   for (int r = 0; r < rows; ++r) {
     image.at<cv::Vec3f>(r, 20) = image.at<cv::Vec3f>(r, 21) = cv::Vec3f(0.1f, 0.1f, 0.1f);
@@ -313,22 +328,11 @@ TEST(DepthPropagator, ARodOnePixelWideKeepsItsDepthWhereItHoldsAlongTheEdge) {
   // to the filter (the rule serves foreground parts).
   const int rows = 40, cols = 40;
   cv::Mat image(rows, cols, CV_32FC3, cv::Scalar(0.5, 0.5, 0.5));
-  DepthMap m(rows, cols);
-  EdgeConsistency e;
-  e.c_plus = cv::Mat::zeros(rows, cols, CV_32F);
-  e.c_minus = cv::Mat::zeros(rows, cols, CV_32F);
-  e.c_centre = cv::Mat::zeros(rows, cols, CV_32F);
-  e.direction = cv::Mat::zeros(rows, cols, CV_32FC2);
-  e.evaluated = cv::Mat::zeros(rows, cols, CV_8U);
+  EdgeMaps in(rows, cols, true);
+  const DepthMap& m = in.map;
+  const EdgeConsistency& e = in.edges;
   const auto edge = [&](int r, int c, float d, std::uint8_t label, float cp, float cm, float c0) {
-    m.depth.at<float>(r, c) = d;
-    m.confidence.at<float>(r, c) = 1.0f;
-    m.label.at<std::uint8_t>(r, c) = label;
-    e.c_plus.at<float>(r, c) = cp;
-    e.c_minus.at<float>(r, c) = cm;
-    e.c_centre.at<float>(r, c) = c0;
-    e.direction.at<cv::Vec2f>(r, c) = {1, 0};
-    e.evaluated.at<std::uint8_t>(r, c) = 255;
+    in.Edge(r, c, d, label, cp, cm, c0);
   };
   for (int r = 0; r < rows; ++r) {
     image.at<cv::Vec3f>(r, 20) = cv::Vec3f(0.1f, 0.1f, 0.1f);
