@@ -228,6 +228,21 @@ void PhotoconsistencyAccumulator::Add(const ViewImage& neighbor) {
   const float inv_two_sigma2 = static_cast<float>(1.0 / (2.0 * o.sigma_p * o.sigma_p * S));
   const std::size_t per_pixel = static_cast<std::size_t>(6 * S + (o.centre_consistency ? 9 : 0));
   const float inv_two_sigma2_centre = static_cast<float>(1.0 / (2.0 * o.sigma_p * o.sigma_p * 3));
+  // Σ‖f − g‖² of n samples at y0 + (first + i·step)·dy (i = 0..n−1) in the
+  // neighbour against the reference's at `ref` (3 floats each); false when a
+  // sample leaves the neighbour.
+  const auto ssd_along = [&image](const Eigen::Vector3f& y0, const Eigen::Vector3f& dy, int first, int step, int n,
+                                  const float* ref, float* ssd) {
+    *ssd = 0;
+    for (int i = 0; i < n; ++i) {
+      const Eigen::Vector3f y = y0 + static_cast<float>(first + i * step) * dy;
+      Eigen::Vector3f g;
+      if (!(y.z() > 0) || !SampleBgr(image, y.x() / y.z(), y.y() / y.z(), &g)) return false;
+      const float* fk = ref + 3 * i;
+      *ssd += (Eigen::Vector3f(fk[0], fk[1], fk[2]) - g).squaredNorm();
+    }
+    return true;
+  };
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, pixels_.size(), 256),
                     [&](const tbb::blocked_range<std::size_t>& range) {
     for (std::size_t i = range.begin(); i != range.end(); ++i) {
@@ -239,38 +254,16 @@ void PhotoconsistencyAccumulator::Add(const ViewImage& neighbor) {
       const Eigen::Vector3f dy = d * (pair.A.leftCols<2>() * Eigen::Vector2f(px.sx, px.sy));
       for (int side = 0; side < 2; ++side) {
         if (!px.side_ok[side]) continue;
-        const float sgn = side == 0 ? 1.0f : -1.0f;
-        float ssd = 0;
-        bool ok = true;
-        for (int k = 1; k <= S; ++k) {
-          const Eigen::Vector3f y = y0 + (sgn * k) * dy;
-          Eigen::Vector3f g;
-          if (!(y.z() > 0) || !SampleBgr(image, y.x() / y.z(), y.y() / y.z(), &g)) {
-            ok = false;
-            break;
-          }
-          const float* fk = fs + 3 * (side * S + k - 1);
-          ssd += (Eigen::Vector3f(fk[0], fk[1], fk[2]) - g).squaredNorm();
-        }
-        if (!ok) continue;
+        const int sgn = side == 0 ? 1 : -1;  // samples at p ± k·step, k = 1..S
+        float ssd;
+        if (!ssd_along(y0, dy, sgn, sgn, S, fs + 3 * side * S, &ssd)) continue;
         px.sum_rho[side] += std::exp(-ssd * inv_two_sigma2);
         ++px.count[side];
       }
-      if (px.centre_ok) {
+      if (px.centre_ok) {  // samples at p + k·t, k = −1, 0, 1, t ⊥ θ(p)
         const Eigen::Vector3f dt = d * (pair.A.leftCols<2>() * Eigen::Vector2f(-px.sy, px.sx));
-        float ssd = 0;
-        bool ok = true;
-        for (int k = -1; k <= 1; ++k) {
-          const Eigen::Vector3f y = y0 + static_cast<float>(k) * dt;
-          Eigen::Vector3f g;
-          if (!(y.z() > 0) || !SampleBgr(image, y.x() / y.z(), y.y() / y.z(), &g)) {
-            ok = false;
-            break;
-          }
-          const float* fk = fs + 6 * S + 3 * (k + 1);
-          ssd += (Eigen::Vector3f(fk[0], fk[1], fk[2]) - g).squaredNorm();
-        }
-        if (ok) {
+        float ssd;
+        if (ssd_along(y0, dt, -1, 1, 3, fs + 6 * S, &ssd)) {
           px.sum_centre += std::exp(-ssd * inv_two_sigma2_centre);
           ++px.count_centre;
         }

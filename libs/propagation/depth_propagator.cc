@@ -132,9 +132,7 @@ SplatMaps DepthPropagator::Splat(const DepthMap& filtered, const EdgeConsistency
         // consistent side, unless (blocked_silhouettes_keep_depth) the pixel
         // and its target are a pair that splat into each other: then it keeps
         // its own depth, else the part would reach the filter nowhere.
-        if (silhouette_splat_only && std::abs(cp - cm) > ratio * (cp + cm)) {
-          if (!(keep_blocked && silhouette_pair(r, c))) conf = 0;
-        }
+        if (silhouette_splat_only && silhouette(r, c) && !(keep_blocked && silhouette_pair(r, c))) conf = 0;
         // A part one or two pixels wide (PhotoconsistencyOptions::centre_consistency):
         // its depth holds along the edge (C0) better than on either side of
         // it, which both see what lies behind; it keeps its depth with C0.
