@@ -241,20 +241,22 @@ void JobStore::WriteFrame(const std::string& id, const pb::Frame& frame) const {
   WriteFileAtomic(FramePath(id, static_cast<int>(frame.index())), frame.SerializeAsString());
 }
 
-cv::Mat JobStore::ReadFrame(const std::string& id, int index, const PinholeView& expect) const {
-  const fs::path path = FramePath(id, index);
+// The stored Frame of `index`, checked to be that frame.
+static pb::Frame ReadStoredFrame(const fs::path& path, int index) {
   pb::Frame f;
   ParseFile(path, &f);
   if (static_cast<int>(f.index()) != index) throw InputError(path.string(), "index", "holds frame " + std::to_string(f.index()));
-  return FrameFromProto(f, expect.width, expect.height, path.string());
+  return f;
+}
+
+cv::Mat JobStore::ReadFrame(const std::string& id, int index, const PinholeView& expect) const {
+  const fs::path path = FramePath(id, index);
+  return FrameFromProto(ReadStoredFrame(path, index), expect.width, expect.height, path.string());
 }
 
 cv::Mat JobStore::ReadMask(const std::string& id, int index, const PinholeView& expect) const {
   const fs::path path = FramePath(id, index);
-  pb::Frame f;
-  ParseFile(path, &f);
-  if (static_cast<int>(f.index()) != index) throw InputError(path.string(), "index", "holds frame " + std::to_string(f.index()));
-  return MaskFromProto(f, expect.width, expect.height, path.string());
+  return MaskFromProto(ReadStoredFrame(path, index), expect.width, expect.height, path.string());
 }
 
 void JobStore::WriteMap(const std::string& id, const pb::DepthMap& map) const {
