@@ -279,15 +279,12 @@ TEST(DepthPropagator, ARodTwoPixelsWideKeepsItsDepthWhereItsSplatsCannotLand) {
   EdgeMaps in(rows, cols, false);
   const DepthMap& m = in.map;
   const EdgeConsistency& e = in.edges;
-  const auto edge = [&](int r, int c, float d, std::uint8_t label, float cp, float cm) {
-    in.Edge(r, c, d, label, cp, cm);
-  };
   for (int r = 0; r < rows; ++r) {
     image.at<cv::Vec3f>(r, 20) = image.at<cv::Vec3f>(r, 21) = cv::Vec3f(0.1f, 0.1f, 0.1f);
-    edge(r, 20, 0.6f, kFg, 0.9f, 0.1f);  // object to the right
-    edge(r, 21, 0.6f, kFg, 0.1f, 0.9f);  // object to the left
+    in.Edge(r, 20, 0.6f, kFg, 0.9f, 0.1f);  // object to the right
+    in.Edge(r, 21, 0.6f, kFg, 0.1f, 0.9f);  // object to the left
     for (int c = 2; c < cols; c += 5)
-      if (c < 18 || c > 23) edge(r, c, 2.0f, kBg, 0.8f, 0.8f);  // background texture
+      if (c < 18 || c > 23) in.Edge(r, c, 2.0f, kBg, 0.8f, 0.8f);  // background texture
   }
   PropagationOptions on, off;
   on.blocked_silhouettes_keep_depth = true;
@@ -331,16 +328,13 @@ TEST(DepthPropagator, ARodOnePixelWideKeepsItsDepthWhereItHoldsAlongTheEdge) {
   EdgeMaps in(rows, cols, true);
   const DepthMap& m = in.map;
   const EdgeConsistency& e = in.edges;
-  const auto edge = [&](int r, int c, float d, std::uint8_t label, float cp, float cm, float c0) {
-    in.Edge(r, c, d, label, cp, cm, c0);
-  };
   for (int r = 0; r < rows; ++r) {
     image.at<cv::Vec3f>(r, 20) = cv::Vec3f(0.1f, 0.1f, 0.1f);
-    edge(r, 20, 0.6f, kFg, 0.02f, 0.1f, 0.8f);  // a silhouette (ratio 0.67): it feeds the filter only through its splat
+    in.Edge(r, 20, 0.6f, kFg, 0.02f, 0.1f, 0.8f);  // a silhouette (ratio 0.67): it feeds the filter only through its splat
     for (int c = 2; c < cols; c += 5)
-      if (c < 18 || c > 22) edge(r, c, 2.0f, kBg, 0.8f, 0.8f, 0.8f);  // texture: C0 does not beat the sides
+      if (c < 18 || c > 22) in.Edge(r, c, 2.0f, kBg, 0.8f, 0.8f, 0.8f);  // texture: C0 does not beat the sides
   }
-  edge(5, 32, 2.5f, kBg, 0.1f, 0.1f, 0.9f);  // a background pixel that passes the test
+  in.Edge(5, 32, 2.5f, kBg, 0.1f, 0.1f, 0.9f);  // a background pixel that passes the test
   const DepthPropagator propagator{PropagationOptions{}};
   const SplatMaps splats = propagator.Splat(m, e);
   ASSERT_EQ(splats.thin_confidence.size(), m.depth.size());
