@@ -285,8 +285,7 @@ PipelineResult EmbeddedPipeline::Run(FrameSource& frames) {
       });
   window.clear();
   // The carving frames' object masks (CarvingOptions::carve_outside_masks).
-  const bool mask_carving = mask_of_view_ && options_.refine && options_.refine_options.carve &&
-                            options_.refine_options.carving.carve_outside_masks;
+  const bool mask_carving = mask_of_view_ && CarvesOutsideMasks(options_);
   std::vector<cv::Mat> carve_masks;
   {
     std::map<int, cv::Mat> expanded;  // colour and carving frames share pixels

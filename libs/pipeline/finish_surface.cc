@@ -24,4 +24,8 @@ FinishedSurface FinishSurface(const ProbabilisticFusion& fusion, const TriangleM
   return out;
 }
 
+bool CarvesOutsideMasks(const PipelineOptions& options) {
+  return options.refine && options.refine_options.carve && options.refine_options.carving.carve_outside_masks;
+}
+
 }  // namespace lfrecon

@@ -29,4 +29,10 @@ FinishedSurface FinishSurface(const ProbabilisticFusion& fusion, const TriangleM
                               const std::vector<ColorView>& carve, const std::vector<ColorView>& color,
                               const PipelineOptions& options, const std::vector<cv::Mat>& carve_masks = {});
 
+// Whether FinishSurface uses `carve_masks` (the refinement carves outside the
+// masks: options.refine, carving on, CarvingOptions::carve_outside_masks), so
+// a caller reads the carving frames' masks only then (`lfrecon run`, the
+// service's refined export).
+bool CarvesOutsideMasks(const PipelineOptions& options);
+
 }  // namespace lfrecon

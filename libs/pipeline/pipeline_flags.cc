@@ -20,6 +20,7 @@ PipelineOptions OptionsFromFlags(const ReconstructionFlags& f) {
     options.depth.max_frame_gap = *f.max_frame_gap;
   }
   if (f.no_mask_free_space) options.mask_free_space.confidence = 0;
+  if (f.mask_carving) options.refine_options.carving.carve_outside_masks = true;
   options.Check();
   return options;
 }

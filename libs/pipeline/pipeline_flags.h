@@ -21,6 +21,9 @@ struct ReconstructionFlags {
   std::optional<int> max_frame_gap;
   // Object masks give V only (--no-mask-free-space): PipelineOptions::mask_free_space off.
   bool no_mask_free_space = false;
+  // Object masks also carve the fused voxels outside them (--mask-carving):
+  // CarvingOptions::carve_outside_masks on (used where the refinement carves).
+  bool mask_carving = false;
 };
 
 // PipelineOptions defaults with the flags applied; checked (PipelineOptions::Check). Throws OptionError.

@@ -14,6 +14,7 @@
 #include "io/dataset.h"
 #include "io/colmap_model.h"
 #include "pipeline/embedded_pipeline.h"
+#include "pipeline/finish_surface.h"
 #include "pipeline/pipeline_flags.h"
 #include "poses/pose_refinement.h"
 #include "run_outputs.h"
@@ -78,6 +79,7 @@ int RunPipeline(const RunArgs& args) {
   flags.all_views = args.all_views;
   flags.max_frame_gap = args.max_frame_gap;
   flags.no_mask_free_space = args.no_mask_free_space;
+  flags.mask_carving = args.mask_carving;
   PipelineOptions options = OptionsFromFlags(flags);
   const Dataset ds = Dataset::Open(args.data.Resolve());
   if (!args.views.empty()) options.views = ParseViewRange(args.views, ds.NumViews());
@@ -115,12 +117,10 @@ int RunPipeline(const RunArgs& args) {
                    {"converged", ps.converged}};
     if (!args.out.empty()) WriteRefinedModel(ds, views, args.out / "sparse_refined");
   }
-  if (args.mask_carving) options.refine_options.carving.carve_outside_masks = true;
   options.preview_views = args.outputs.previews;
   EmbeddedPipeline pipeline(views, ds.bbox(), options, names);
   const bool mask_free_space = options.mask_free_space.confidence > 0;
-  const bool mask_carving = options.refine && options.refine_options.carve &&
-                            options.refine_options.carving.carve_outside_masks;
+  const bool mask_carving = CarvesOutsideMasks(options);
   if (ds.HasMasks() && (mask_free_space || mask_carving)) {
     spdlog::info("run: masks from {}: {}", ds.mask_source(),
                  mask_free_space && mask_carving ? "free space outside them in fusion, carved outside them after"
