@@ -34,6 +34,16 @@ std::vector<ColorView> LoadColorViews(const JobStore& store, const JobGeometry& 
   return out;
 }
 
+// The object masks of the frames LoadColorViews gives for `ids`, in its order
+// (an empty Mat where a frame has none), for CarvingOptions::carve_outside_masks.
+std::vector<cv::Mat> LoadMasks(const JobStore& store, const JobGeometry& geo, const std::vector<int>& ids,
+                               const std::vector<char>& frame_ok) {
+  std::vector<cv::Mat> out;
+  for (int v : ids)
+    if (frame_ok[v]) out.push_back(store.ReadMask(geo.id, v, geo.views[v]));
+  return out;
+}
+
 // What a refined export needs, captured on the serving thread.
 struct RefineSnapshot {
   std::string id;
@@ -48,7 +58,8 @@ struct RefineSnapshot {
 // float rounding, and the same result whatever order the workers delivered,
 // so a finished job's export is reproducible), then what `lfrecon run` does
 // after fusion (FinishSurface, libs/pipeline/finish_surface.h): refinement with
-// the plan's carving frames, the fused iso-surface where it made nothing,
+// the plan's carving frames (and their masks when the job carves outside them,
+// JobOptions.mask_carving), the fused iso-surface where it made nothing,
 // colour from the plan's colour frames.
 pb::Envelope RefinedExportReply(const JobStore& store, RefineSnapshot snap) {
   Timer total;
@@ -103,7 +114,9 @@ pb::Envelope RefinedExportReply(const JobStore& store, RefineSnapshot snap) {
     std::map<int, cv::Mat> frames;
     const std::vector<ColorView> carve = LoadColorViews(store, geo, geo.plan.carving_frames, snap.frame_ok, &frames);
     const std::vector<ColorView> color = LoadColorViews(store, geo, geo.plan.color_frames, snap.frame_ok, &frames);
-    FinishedSurface finished = FinishSurface(*fusion, fusion->ExtractMesh(po.meshing), carve, color, po);
+    const std::vector<cv::Mat> carve_masks =
+        CarvesOutsideMasks(po) ? LoadMasks(store, geo, geo.plan.carving_frames, snap.frame_ok) : std::vector<cv::Mat>();
+    FinishedSurface finished = FinishSurface(*fusion, fusion->ExtractMesh(po.meshing), carve, color, po, carve_masks);
     rs = finished.refine;
     mesh = std::move(finished.mesh);
   }
@@ -116,10 +129,10 @@ pb::Envelope RefinedExportReply(const JobStore& store, RefineSnapshot snap) {
   rep->set_vertices(mesh.vertices.size());
   rep->set_triangles(mesh.triangles.size());
   rep->set_views_fused(fused);
-  spdlog::info("aggregate: job {}: refined export of {} fused views: {} triangles from {} carving views ({} carved), "
-               "{:.1f} s ({:.1f} re-fusing the checkpoint, {:.1f} refining)",
-               snap.id, fused, mesh.triangles.size(), rs.carving_views, rs.carved, total.Seconds(),
-               seconds_fusion, rs.seconds_total);
+  spdlog::info("aggregate: job {}: refined export of {} fused views: {} triangles from {} carving views ({} carved, "
+               "{} of them outside {} masks), {:.1f} s ({:.1f} re-fusing the checkpoint, {:.1f} refining)",
+               snap.id, fused, mesh.triangles.size(), rs.carving_views, rs.carved, rs.carved_outside_masks,
+               rs.mask_views, total.Seconds(), seconds_fusion, rs.seconds_total);
   return out;
 }
 

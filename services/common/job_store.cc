@@ -603,6 +603,7 @@ ReconstructionFlags JobFlags(const pb::JobOptions& o) {
   f.all_views = o.all_views();
   if (o.has_max_frame_gap()) f.max_frame_gap = o.max_frame_gap();
   f.no_mask_free_space = o.no_mask_free_space();
+  f.mask_carving = o.mask_carving();
   return f;
 }
 

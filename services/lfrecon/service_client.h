@@ -51,7 +51,7 @@ int PrintStatus(const std::string& job, const pb::JobStatus& s, bool json);
 // The options a job may set, as `lfrecon run`'s flags of the same names.
 struct JobOptionFlags {
   double voxel_mm = 0, sigma_s = 0;
-  bool no_densify = false, all_views = false, no_mask_free_space = false;
+  bool no_densify = false, all_views = false, no_mask_free_space = false, mask_carving = false;
   int color_views = 8;
   int max_frame_gap = -1;  // -1: unset (the default)
   void AddTo(CLI::App* cmd);

@@ -125,6 +125,11 @@ void JobOptionFlags::AddTo(CLI::App* cmd) {
                 "With masks (masks/, an alpha channel, mask_path; each frame carries its mask to the service): use "
                 "them for V only (as lfrecon run --no-mask-free-space). By default the fusion also takes every pixel "
                 "more than 2 px outside its mask as empty space through V");
+  cmd->add_flag("--mask-carving", mask_carving,
+                "With masks: the refined mesh (lfrecon export --refine) also carves the fused voxels that lie outside "
+                "a carving frame's mask (more than 2 px and the voxel's own size from its object) before the "
+                "photo-consistency carving, as lfrecon run --mask-carving. Off by default: masks that miss thin "
+                "parts lose them (docs/benchmarks.md)");
 }
 
 pb::JobOptions JobOptionFlags::ToProto() const {
@@ -137,6 +142,7 @@ pb::JobOptions JobOptionFlags::ToProto() const {
   o.set_all_views(all_views);
   if (max_frame_gap != -1) o.set_max_frame_gap(max_frame_gap);
   o.set_no_mask_free_space(no_mask_free_space);
+  o.set_mask_carving(mask_carving);
   svc::JobPipelineOptions(o);  // every job option checked here, as lfrecon run does (exit 2)
   return o;
 }

@@ -3,8 +3,10 @@
 // that V is the masks' visual hull) submitted to the service, and streamed to
 // it (also with --masks DIR), gives lfrecon run's fused mesh with the masks'
 // free space, vertex for vertex, and its count of masked views; without the
-// masks' free space the mesh differs (so the comparison can fail). A mask of the wrong size, or one
-// that is not PNG, is refused at ingest with an error naming the frame.
+// masks' free space the mesh differs (so the comparison can fail). A job with
+// --mask-carving gives lfrecon run --mask-carving's refined mesh, one without
+// it run's default one. A mask of the wrong size, or one that is not PNG,
+// is refused at ingest with an error naming the frame.
 // Real daemons over ipc:// in a temporary folder.
 #include <gtest/gtest.h>
 
@@ -170,6 +172,40 @@ TEST_F(MasksTest, SubmitAndStreamOfMaskedDatasetEqualRun) {
   const std::size_t run_refined = ReadPly(run_dir / "mesh.ply").triangles.size();
   EXPECT_NEAR(static_cast<double>(refined_triangles), static_cast<double>(run_refined), 0.01 * run_refined);
   std::printf("export --refine: %zu triangles (lfrecon run mesh.ply: %zu)\n", refined_triangles, run_refined);
+  // --mask-carving: the refined export also carves outside the frames' masks, as lfrecon run --mask-carving;
+  // the fusion (mesh_raw) is unchanged. run --mask-carving carves voxels outside the masks, so its mesh.ply
+  // differs from run's, and the job without the option keeps run's.
+  const fs::path run_mc_dir = tmp_.path() / "run_mask_carving";
+  Sh(kBin + "lfrecon -q run --dataset " + data.string() + " --no-refine-poses --mask-carving" + voxel + " --out " +
+     run_mc_dir.string());
+  const nlohmann::json mc_report = nlohmann::json::parse(ReadFileBytes(run_mc_dir / "report.json"));
+  const int carved_outside = mc_report["counts"]["carved_outside_masks"];
+  EXPECT_GT(carved_outside, 0);
+  EXPECT_EQ(mc_report["counts"]["carving_mask_views"], report["counts"]["carving_frames"]);
+  EXPECT_EQ(report["counts"]["carved_outside_masks"], 0);
+  const TriangleMesh run_refined_mesh = ReadPly(run_dir / "mesh.ply");
+  const TriangleMesh run_mc_mesh = ReadPly(run_mc_dir / "mesh.ply");
+  EXPECT_NE(run_mc_mesh.triangles.size(), run_refined_mesh.triangles.size());
+  const std::string carving = FirstLine(Sh(kBin + "lfrecon -q submit --ingest " + ing_ + " --aggregate " + agg_ +
+                                           " --dataset " + data.string() + voxel +
+                                           " --mask-carving --wait --wait-s 300"));
+  ASSERT_TRUE(JobStore::ValidJobId(carving)) << carving;
+  EXPECT_TRUE(js.ReadManifest(carving).spec().options().mask_carving());
+  check_job("submit --mask-carving", carving);
+  const fs::path refined_mc = tmp_.path() / "refined_mask_carving.ply";
+  Sh(kBin + "lfrecon -q export " + carving + " --refine --aggregate " + agg_ + " -o " + refined_mc.string());
+  const TriangleMesh refined_mc_mesh = ReadPly(refined_mc), refined_mesh = ReadPly(refined);
+  // Vertex for vertex: the same grid (view order), the same carving frames and masks, the same carving.
+  const double d_mc = LargestDifference(refined_mc_mesh, run_mc_mesh);
+  const double d_plain = LargestDifference(refined_mesh, run_refined_mesh);
+  EXPECT_LE(d_mc, 1e-6) << "export --refine of a --mask-carving job against run --mask-carving's mesh.ply";
+  EXPECT_LE(d_plain, 1e-6) << "export --refine of a job without it against run's mesh.ply";
+  EXPECT_EQ(LargestDifference(refined_mc_mesh, run_refined_mesh), std::numeric_limits<double>::infinity());
+  std::printf("export --refine --mask-carving job: %zu triangles, largest vertex difference to run --mask-carving's "
+              "mesh.ply (%zu triangles, %d voxels carved outside the masks) %.3g m; without the option %zu "
+              "triangles, %.3g m to run's (%zu)\n",
+              refined_mc_mesh.triangles.size(), run_mc_mesh.triangles.size(), carved_outside, d_mc,
+              refined_mesh.triangles.size(), d_plain, run_refined_mesh.triangles.size());
   const std::string streamed = FirstLine(Sh(kBin + "lfrecon -q stream --ingest " + ing_ + " --aggregate " + agg_ +
                                             " --dataset " + data.string() + voxel + " --wait --wait-s 300"));
   ASSERT_TRUE(JobStore::ValidJobId(streamed)) << streamed;
