@@ -126,7 +126,9 @@ std::unique_ptr<ProbabilisticFusion> NewFusion(const JobGeometry& geo);
 // its stored dense map `dense` with the background floor (gated by the view's
 // sparse map, read here) and then, unless the job's options turn it off, the
 // free space outside its frame's mask when the frame carries one (Frame.mask,
-// WithMaskFreeSpace). `masked` (may be null): whether a mask was applied.
+// WithMaskFreeSpace; the frame's file is not read when no frame of the job
+// carries a mask, JobGeometry::frame_masks). `masked` (may be null): whether a
+// mask was applied.
 // Throws InputError naming the frame's file when its mask is unreadable.
 DepthMap FusionInput(const JobStore& store, const JobGeometry& geo, int v, DepthMap dense, bool* masked);
 // The fused mesh with colour from the plan's colour frames (as the embedded

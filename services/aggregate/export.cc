@@ -40,7 +40,7 @@ std::vector<cv::Mat> LoadMasks(const JobStore& store, const JobGeometry& geo, co
                                const std::vector<char>& frame_ok) {
   std::vector<cv::Mat> out;
   for (int v : ids)
-    if (frame_ok[v]) out.push_back(store.ReadMask(geo.id, v, geo.views[v]));
+    if (frame_ok[v]) out.push_back(geo.frame_masks ? store.ReadMask(geo.id, v, geo.views[v]) : cv::Mat());
   return out;
 }
 

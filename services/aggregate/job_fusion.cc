@@ -37,7 +37,8 @@ DepthMap FusionInput(const JobStore& store, const JobGeometry& geo, int v, Depth
     dense = WithBackgroundFloor(dense, sparse, view, geo.volume, po);
   }
   const PipelineOptions::MaskFreeSpace& mf = po.mask_free_space;
-  if (mf.confidence > 0) {  // after the floor, as lfrecon run
+  // After the floor, as lfrecon run. A job whose frames carry no mask reads no frame file here.
+  if (mf.confidence > 0 && geo.frame_masks) {
     const cv::Mat mask = store.ReadMask(geo.id, v, view);
     if (!mask.empty()) {
       dense = WithMaskFreeSpace(dense, mask, mf.confidence, mf.margin_px);

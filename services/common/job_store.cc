@@ -621,6 +621,7 @@ pb::JobManifest MakeManifest(const std::string& id, const pb::JobSpec& spec, con
   *m.mutable_volume() = BoxToProto(ds.bbox());
   m.set_pose_source(ds.pose_source());
   m.set_bbox_source(ds.bbox_source());
+  m.set_frame_masks(ds.HasMasks());  // StoreFrameEncoder stores each frame's mask then
   return m;
 }
 
@@ -660,6 +661,7 @@ JobGeometry LoadJobGeometry(const JobStore& store, const std::string& id) {
   }
   if (g.views.empty()) throw InputError(what, "views", "no views");
   g.volume = BoxFromProto(m.volume(), what);
+  g.frame_masks = !m.has_frame_masks() || m.frame_masks();  // unset (an older store): look at each frame
   g.options = JobPipelineOptions(m.spec().options());
   // Validated with V (the fusion grid), as `lfrecon run` plans its run.
   g.plan = ReconstructionPlan::Compute(g.views, g.volume, g.options);
@@ -686,6 +688,7 @@ JobGeometry LoadStreamGeometry(const JobStore& store, const std::string& id) {
   JobGeometry g;
   g.id = id;
   g.open = true;
+  g.frame_masks = false;  // until a stored frame carries one (GrowStreamGeometry)
   g.volume = *SpecVolume(open->spec());
   g.options = JobPipelineOptions(open->spec().options());
   g.plan.fusion = JobFusionOptions(g.options, g.volume);
@@ -701,6 +704,7 @@ bool GrowStreamGeometry(const JobStore& store, JobGeometry* g, bool lazy) {
     ParseFile(path, &f);
     g->views.push_back(CameraFromProto(f.camera(), path.string()));
     g->names.push_back(f.camera().name());
+    g->frame_masks = g->frame_masks || !f.mask().empty();
   }
   if (g->views.size() == before) return false;
   if (lazy && ReconstructionPlan::SettledDepthFrames(static_cast<int>(g->views.size()), false, g->options) == 0)

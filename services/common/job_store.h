@@ -203,6 +203,11 @@ struct JobGeometry {
   // plan of that prefix, final for its settled frames (ReconstructionPlan::
   // SettledFrames) and, for selection and on_grid, for every frame of it.
   bool open = false;
+  // Whether a frame of the job may carry an object mask (Frame.mask): false
+  // when none does (JobManifest.frame_masks false; of an open stream, none of
+  // its stored frames), so no frame file need be read for its mask. True when
+  // the manifest does not say (a store written before the field).
+  bool frame_masks = true;
 };
 // The manifest's geometry; for an open stream that gives V (GrowingStream), its
 // received prefix (LoadStreamGeometry). Throws InputError / OptionError.

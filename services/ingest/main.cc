@@ -266,6 +266,7 @@ void StreamWriter(zmq::context_t& context, const IngestOptions& o, const JobStor
   const std::string& id = s.id;
   RequestClient agg(context, o.aggregate, o.max_message_bytes, o.to_aggregate);
   std::map<std::uint32_t, pb::Camera> cameras;  // stored frames
+  bool frame_masks = false;                     // a stored frame carried a mask (JobManifest.frame_masks)
   Timer timer;
   auto answer = [&](RouterServer::Incoming in, pb::Envelope reply) {
     std::lock_guard<std::mutex> lk(s.mu);
@@ -343,6 +344,7 @@ void StreamWriter(zmq::context_t& context, const IngestOptions& o, const JobStor
           }
           *m.mutable_volume() = BoxToProto(volume);
           m.set_pose_source("stream");
+          m.set_frame_masks(frame_masks);
           // The job's plan, as the aggregator will compute it: refused here if it cannot be.
           ReconstructionPlan::Compute(views, volume, JobPipelineOptions(s.open.spec().options()));
           store.WriteText(id, "ingest.done", std::to_string(n));
@@ -401,6 +403,7 @@ void StreamWriter(zmq::context_t& context, const IngestOptions& o, const JobStor
                                    std::to_string(o.job_quota_gb) + ")");
       store.WriteFrame(id, f);
       cameras[k] = f.camera();
+      frame_masks = frame_masks || !f.mask().empty();
       if (o.frame_delay_ms > 0) std::this_thread::sleep_for(std::chrono::milliseconds(o.frame_delay_ms));
       reply = NewEnvelope(id);
       pb::StreamCredit* c = reply.mutable_stream_credit();

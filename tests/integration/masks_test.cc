@@ -5,7 +5,8 @@
 // free space, vertex for vertex, and its count of masked views; without the
 // masks' free space the mesh differs (so the comparison can fail). A job with
 // --mask-carving gives lfrecon run --mask-carving's refined mesh, one without
-// it run's default one. A mask of the wrong size, or one that is not PNG,
+// it run's default one. The manifest records whether the frames carry masks
+// (JobManifest.frame_masks). A mask of the wrong size, or one that is not PNG,
 // is refused at ingest with an error naming the frame.
 // Real daemons over ipc:// in a temporary folder.
 #include <gtest/gtest.h>
@@ -141,6 +142,7 @@ TEST_F(MasksTest, SubmitAndStreamOfMaskedDatasetEqualRun) {
     EXPECT_EQ(s.views_fused(), static_cast<unsigned>(selected)) << how;
     EXPECT_EQ(s.masked_views(), static_cast<unsigned>(masked)) << how;
     const pb::JobManifest m = js.ReadManifest(job);
+    EXPECT_TRUE(m.has_frame_masks() && m.frame_masks()) << how << ": the manifest says the frames carry masks";
     const BoundingBox v = BoxFromProto(m.volume(), how);
     EXPECT_EQ((v.min - ds.bbox().min).norm() + (v.max - ds.bbox().max).norm(), 0.0) << how << ": V from the masks";
     int frames_with_masks = 0;
@@ -284,6 +286,65 @@ TEST_F(MasksTest, MalformedMaskIsRefusedNamingTheFrame) {
   JobStore js(store_);
   for (int k = 0; k < ds.NumViews(); ++k)
     EXPECT_EQ(cv::norm(js.ReadMask(client.job_id(), k, ds.View(k)), ds.ReadMask(k), cv::NORM_INF), 0) << k;
+}
+
+// The manifest records whether the job's frames carry masks (JobManifest.frame_masks), so the
+// aggregator reads no frame file for a mask when none does (JobGeometry::frame_masks): a submitted
+// masked dataset says so before its first frame, a stream after its end (the frames it stored);
+// an open stream's geometry knows it from its stored frames; a manifest without the field (a store
+// written before it) means "look at each frame".
+TEST_F(MasksTest, ManifestRecordsWhetherFramesCarryMasks) {
+  const fs::path data = Synth(4, 64, 36, 4.0);
+  DatasetOptions d;
+  d.dataset_dir = data;
+  const Dataset ds = Dataset::Open(d);
+  StoreFrameEncoder enc(ds);
+  StartStack(false);
+  JobStore js(store_);
+  const std::string submitted =
+      FirstLine(Sh(kBin + "lfrecon -q submit --ingest " + ing_ + " --aggregate " + agg_ + " --dataset " + data.string()));
+  ASSERT_TRUE(JobStore::ValidJobId(submitted)) << submitted;
+  const pb::JobManifest sm = js.ReadManifest(submitted);  // written before the reply
+  EXPECT_TRUE(sm.has_frame_masks() && sm.frame_masks());
+  EXPECT_TRUE(LoadJobGeometry(js, submitted).frame_masks);
+  // A stream of the same frames with and without their masks; V given, so it is a job while open.
+  auto stream = [&](bool masks) {
+    StreamClient client(context_, ing_);
+    pb::StreamOpen open;
+    for (int k = 0; k < 3; ++k) open.mutable_spec()->add_bbox(ds.bbox().min(k));
+    for (int k = 0; k < 3; ++k) open.mutable_spec()->add_bbox(ds.bbox().max(k));
+    client.Open(open, milliseconds(10000));
+    for (int k = 0; k < ds.NumViews(); ++k) {
+      pb::Frame f = enc.Encode(k, false);
+      EXPECT_FALSE(f.mask().empty());
+      if (!masks) f.clear_mask();
+      if (k > 0) {
+        client.Push(f, milliseconds(10000));
+        continue;
+      }
+      pb::Envelope env = NewEnvelope();  // the first frame, answered once stored
+      *env.mutable_stream_frame()->mutable_frame() = f;
+      client.SendUnchecked(env);
+      const auto r = client.Receive(milliseconds(10000));
+      EXPECT_TRUE(r && !r->has_error()) << (r ? r->error().message() : "(no answer)");
+      const JobGeometry open_geo = LoadStreamGeometry(js, client.job_id());
+      EXPECT_EQ(open_geo.views.size(), 1u);
+      EXPECT_EQ(open_geo.frame_masks, masks) << "open stream, masks " << masks;
+    }
+    client.End(static_cast<std::uint32_t>(ds.NumViews()), milliseconds(30000));
+    const pb::JobManifest m = js.ReadManifest(client.job_id());
+    EXPECT_TRUE(m.has_frame_masks());
+    EXPECT_EQ(m.frame_masks(), masks);
+    EXPECT_EQ(LoadJobGeometry(js, client.job_id()).frame_masks, masks) << "ended stream, masks " << masks;
+    return client.job_id();
+  };
+  stream(true);
+  const std::string plain = stream(false);
+  // A manifest without the field: unknown, so each frame is looked at.
+  pb::JobManifest old = js.ReadManifest(plain);
+  old.clear_frame_masks();
+  js.WriteManifest(old);
+  EXPECT_TRUE(LoadJobGeometry(js, plain).frame_masks);
 }
 
 }  // namespace
