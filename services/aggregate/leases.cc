@@ -78,6 +78,11 @@ pb::Envelope Aggregator::HandleTaskRequest(const pb::Envelope& req, const Worker
     const auto old = Clock::now() - std::chrono::seconds(60);
     for (auto it = seen.begin(); it != seen.end();) it = it->second < old ? seen.erase(it) : std::next(it);
   }
+  // A worker's first request is logged: operators see who serves, and a test
+  // can wait until every worker it started has been heard from.
+  if (seen.emplace(worker.id, Clock::now()).second)
+    spdlog::info("aggregate: {} worker {} asks for tasks", stage == pb::STAGE_DEPTH ? "depth" : "propagate",
+                 worker.label);
   seen[worker.id] = Clock::now();
   const bool others = OtherWorkerAlive(stage, worker.id);
   for (auto& [id, jp] : jobs_) {

@@ -527,12 +527,25 @@ TEST_F(FaultsTest, WorkerNameAndErrorAreSanitisedAndBounded) {
 // A worker error result used to fail the job at once: the view is retried on
 // another worker, and the job completes.
 TEST_F(FaultsTest, WorkerErrorIsRetriedOnAnotherWorker) {
-  StartAggregator();
+  DaemonProcess* agg = StartAggregator();
   StartIngest();
   StartWorker("lfrecon-depth", {"--fail-tasks", "1000000"});  // fails every task
   StartWorker("lfrecon-depth");
   StartWorker("lfrecon-propagate", {"--fail-tasks", "2"});  // fails its first two
   StartWorker("lfrecon-propagate");
+  // Every worker heard from before the job starts: a worker that connects late
+  // (ipc reconnects every 100 ms) is not there to take the retry, and the
+  // failing one, the only depth worker the aggregator knows, would get all attempts.
+  const auto heard = [&](const std::string& stage) {
+    const std::string log = agg->Log(), what = "aggregate: " + stage + " worker ";
+    int n = 0;
+    for (auto at = log.find(what); at != std::string::npos; at = log.find(what, at + 1)) ++n;
+    return n;
+  };
+  for (int i = 0; i < 400 && (heard("depth") < 2 || heard("propagate") < 2); ++i)
+    std::this_thread::sleep_for(milliseconds(25));
+  ASSERT_EQ(heard("depth"), 2) << agg->LogTail();
+  ASSERT_EQ(heard("propagate"), 2) << agg->LogTail();
   const std::string job = Submit();
   const pb::JobStatus s = WaitEnded(job);
   EXPECT_EQ(s.state(), pb::STATE_DONE) << s.message();
