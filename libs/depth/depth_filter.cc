@@ -16,6 +16,7 @@ void DepthFilterOptions::Check() const {
   LFRECON_CHECK_OPTION(sigma_v_voxels > 0);
   LFRECON_CHECK_OPTION(max_view_angle_deg > 0);
   LFRECON_CHECK_OPTION(min_votes >= 0);
+  LFRECON_CHECK_OPTION(!confidence_from_votes || votes_saturation_per_view > 0);
 }
 
 VoteGrid::VoteGrid(const BoundingBox& volume, const DepthFilterOptions& options) : options_(options), volume_(volume) {
@@ -130,7 +131,21 @@ float VoteGrid::VotesAtGrid(const Eigen::Vector3d& g) const {
   return sum;
 }
 
-DepthMap VoteGrid::Filter(const DepthMap& map, const PinholeView& view) const {
+double FullWindowViews(const std::vector<Eigen::Vector3d>& voters, double max_view_angle_deg) {
+  const double n = static_cast<double>(voters.size());
+  std::vector<double> steps;
+  for (std::size_t k = 1; k < voters.size(); ++k)
+    steps.push_back(std::acos(std::clamp(voters[k].normalized().dot(voters[k - 1].normalized()), -1.0, 1.0)) *
+                    180.0 / M_PI);
+  if (steps.empty()) return std::max(1.0, n);
+  std::nth_element(steps.begin(), steps.begin() + steps.size() / 2, steps.end());
+  const double step = steps[steps.size() / 2];
+  if (!(step > 1e-9)) return std::max(1.0, n);
+  return std::max(n, 1.0 + 2.0 * max_view_angle_deg / step);
+}
+
+DepthMap VoteGrid::Filter(const DepthMap& map, const PinholeView& view, double window_views) const {
+  const float saturation = static_cast<float>(options_.votes_saturation_per_view * std::max(1.0, window_views));
   DepthMap out;
   out.depth = map.depth.clone();
   out.confidence = map.confidence.clone();
@@ -191,7 +206,7 @@ DepthMap VoteGrid::Filter(const DepthMap& map, const PinholeView& view) const {
         // Multi-view support of the chosen point joins the pixel's own confidence.
         if (options_.confidence_from_votes)
           out.confidence.at<float>(r, col) =
-              map.confidence.at<float>(r, col) * std::min(1.0f, best / static_cast<float>(options_.votes_saturation));
+              map.confidence.at<float>(r, col) * std::min(1.0f, best / saturation);
       }
     }
   });
@@ -203,7 +218,9 @@ DepthMap FilterDepth(const DepthMap& map, const PinholeView& view, const std::ve
                      const DepthFilterOptions& options) {
   VoteGrid grid(volume, options);
   for (size_t k = 0; k < voters.size(); ++k) grid.Splat(*voters[k], *voter_views[k], 1.0f);
-  return grid.Filter(map, view);
+  std::vector<Eigen::Vector3d> dirs;
+  for (const PinholeView* v : voter_views) dirs.push_back(v->ViewingDirection());
+  return grid.Filter(map, view, FullWindowViews(dirs, options.max_view_angle_deg));
 }
 
 }  // namespace lfrecon

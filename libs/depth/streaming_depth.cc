@@ -17,6 +17,7 @@ void StreamingDepthOptions::Check() const {
   gradient.Check();
   filter.Check();
   LFRECON_CHECK_OPTION(max_frame_gap >= 0);
+  LFRECON_CHECK_OPTION(voter_min_step_deg >= 0 && voter_min_step_deg < filter.max_view_angle_deg);
 }
 
 StreamingDepth::StreamingDepth(std::vector<PinholeView> views, const BoundingBox& volume,
@@ -25,10 +26,10 @@ StreamingDepth::StreamingDepth(std::vector<PinholeView> views, const BoundingBox
   options_.Check();
 }
 
-std::vector<int> FilterVoters(const ViewGraph& wide, const std::vector<char>& on_grid, int i) {
+std::vector<int> FilterVoters(const ViewGraph& wide, const std::vector<char>& can_vote, int i) {
   std::vector<int> out;
   for (int j : wide.Neighbors(i))
-    if (on_grid.at(static_cast<std::size_t>(j))) out.push_back(j);
+    if (can_vote.at(static_cast<std::size_t>(j))) out.push_back(j);
   return out;
 }
 
@@ -50,13 +51,18 @@ DepthPlan PlanDepth(const std::vector<PinholeView>& views, const StreamingDepthO
   // views within 5°, on the sequence's hierarchy grid (level_min_step_deg), so
   // a dense sequence holds only the grid frames and the pending references
   // with their nearest neighbours, not every frame within 5°. The filter's
-  // voters are on the same grid.
+  // voters lie on the same grid, or on a coarser one spaced voter_min_step_deg
+  // (FilterVoters says why).
   plan.on_grid = HierarchyGrid(views, options.gradient);
   plan.voters.assign(n, {});
   if (options.run_filter) {
     const ViewGraph wide(dirs, options.filter.max_view_angle_deg, options.max_frame_gap);
+    GradientDepthOptions voter_spacing = options.gradient;  // the grid's greedy spacing, at the voters' step
+    voter_spacing.level_min_step_deg = std::max(voter_spacing.level_min_step_deg, options.voter_min_step_deg);
+    const std::vector<char> can_vote =
+        options.voter_min_step_deg > 0 ? HierarchyGrid(views, voter_spacing) : plan.on_grid;
     for (int i : wanted) {
-      plan.voters[i] = FilterVoters(wide, plan.on_grid, i);
+      plan.voters[i] = FilterVoters(wide, can_vote, i);
       std::sort(plan.voters[i].begin(), plan.voters[i].end());
     }
   }

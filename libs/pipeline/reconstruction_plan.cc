@@ -49,7 +49,13 @@ ReconstructionPlan ReconstructionPlan::Compute(const std::vector<PinholeView>& c
   ReconstructionPlan plan;
   plan.fusion = PipelineFusionOptions(options, volume);
   std::vector<int> wanted = options.views.empty() ? SelectViews(cameras, options.selection) : options.views;
-  plan.depth = PlanDepth(cameras, options.depth, wanted);  // checks the range, sorts
+  // Selected views are the filter's voters (StreamingDepthOptions::voter_min_step_deg):
+  // the same greedy rule at the same step, so no view but the selected ones needs a sparse map.
+  StreamingDepthOptions depth = options.depth;
+  if (options.views.empty() && options.selection.enabled &&
+      options.selection.min_step_deg < depth.filter.max_view_angle_deg)
+    depth.voter_min_step_deg = std::max(depth.voter_min_step_deg, options.selection.min_step_deg);
+  plan.depth = PlanDepth(cameras, depth, wanted);  // checks the range, sorts
   plan.views = plan.depth.wanted;
   plan.selected.assign(static_cast<std::size_t>(n), 0);
   for (int i : plan.views) plan.selected[static_cast<std::size_t>(i)] = 1;

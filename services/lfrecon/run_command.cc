@@ -159,8 +159,8 @@ void AddRunCommand(CLI::App& root, int* exit_code) {
   cmd->add_option("--voxel-mm", args->voxel_mm, "Voxel edge in mm (default: the longest side of V / 256)");
   cmd->add_flag("--write-depth", args->write_depth, "Also write the fused per-view depth maps (depth/, confidence/ PFM)");
   cmd->add_option("--views", args->views, "Views to process, A:B:STEP (0-based, B exclusive); default: selected "
-                   "automatically, views >= 0.5 deg apart (on a dense video, lfrecon info: mean_step_deg well under "
-                   "0.5; sparser sequences keep every view). Every frame is still read and serves as a neighbour");
+                   "automatically, views >= 1 deg apart (lfrecon info: mean_step_deg; a sequence 1 deg apart or more "
+                   "keeps every view). Every frame is still read and serves as a neighbour");
   cmd->add_flag("--all-views", args->all_views,
                 "Process every view (no view selection): depth and fusion of each frame, also on a dense video");
   cmd->add_option("--max-frame-gap", args->max_frame_gap,

@@ -115,7 +115,7 @@ void JobOptionFlags::AddTo(CLI::App* cmd) {
   cmd->add_flag("--no-densify", no_densify, "Fuse the filtered sparse maps (as lfrecon run)");
   cmd->add_flag("--all-views", all_views,
                 "Process every view (as lfrecon run --all-views); by default a dense video's views are selected "
-                ">= 0.5 deg apart");
+                ">= 1 deg apart");
   cmd->add_option("--color-views", color_views, "Frames used to colour the mesh (0: none)")->capture_default_str();
   cmd->add_option("--max-frame-gap", max_frame_gap,
                   "Views more than this many frames apart are never neighbours (as lfrecon run --max-frame-gap; 0: "
