@@ -60,6 +60,7 @@ TEST(ReconstructionPlan, DenseArcNeighboursAndGridAgainstHandCounts) {
   const std::vector<PinholeView> cams = Arc(200, 0.35);
   PipelineOptions o;
   o.depth.max_frame_gap = 0;
+  o.selection.min_step_deg = 0.5;  // the hand counts below are for a 0.5° selection (the default is 1°)
   const ReconstructionPlan plan = ReconstructionPlan::Compute(cams, Box(), o);
   ASSERT_EQ(plan.num_views(), 200);
   for (int k = 0; k < 200; ++k) {
@@ -96,15 +97,19 @@ TEST(ReconstructionPlan, DenseArcNeighboursAndGridAgainstHandCounts) {
 
 TEST(ReconstructionPlan, ViewSelectionCounts) {
   PipelineOptions o;
-  // 0.25° apart: every second view (0.5°, exactly the step: kept up to rounding).
-  EXPECT_EQ(ReconstructionPlan::Compute(Arc(240, 0.25), Box(), o).views.size(), 120u);
-  // 0.12° (a 3000-frame loop's spacing): every fifth (0.6°), 0.48° being short of 0.5°.
+  // 0.25° apart: every fourth view (1°, exactly the step: kept up to rounding).
+  EXPECT_EQ(ReconstructionPlan::Compute(Arc(240, 0.25), Box(), o).views.size(), 60u);
+  // 0.12° (a 3000-frame loop's spacing): every ninth (1.08°), 0.96° being short of 1°.
   const ReconstructionPlan p12 = ReconstructionPlan::Compute(Arc(300, 0.12), Box(), o);
-  EXPECT_EQ(p12.views.size(), 60u);
-  EXPECT_EQ(p12.views[1], 5);
-  // 0.75° (figurines) and 1.5° (the demo): every view.
-  EXPECT_EQ(ReconstructionPlan::Compute(Arc(100, 0.75), Box(), o).views.size(), 100u);
+  EXPECT_EQ(p12.views.size(), 34u);
+  EXPECT_EQ(p12.views[1], 9);
+  // 0.75° (figurines): every second (1.5°); 1.5° (the demo): every view.
+  EXPECT_EQ(ReconstructionPlan::Compute(Arc(100, 0.75), Box(), o).views.size(), 50u);
   EXPECT_EQ(ReconstructionPlan::Compute(Arc(100, 1.5), Box(), o).views.size(), 100u);
+  // 0.5° (the default before docs/benchmarks.md "Fewer views, relative vote
+  // saturation"): every fifth of the 0.12° loop (0.6°).
+  o.selection.min_step_deg = 0.5;
+  EXPECT_EQ(ReconstructionPlan::Compute(Arc(300, 0.12), Box(), o).views.size(), 60u);
   // A smaller step keeps more; selection off keeps all.
   o.selection.min_step_deg = 0.25;
   EXPECT_EQ(ReconstructionPlan::Compute(Arc(300, 0.12), Box(), o).views.size(), 100u);  // every third (0.36°)
@@ -126,13 +131,19 @@ TEST(ReconstructionPlan, ViewSelectionCounts) {
 }
 
 // Where views are >= 0.5° apart the grid holds every view and the depth
-// neighbours are every view within 5° (0.8°: 6 per side, 12), the voters every
-// view within 15° (18 per side, 36).
+// neighbours are every view within 5° (0.8°: 6 per side, 12). The default 1°
+// selection keeps every second view (1.6°), and the filter's voters are the
+// selected views within 15° (9 per side, 18): no other view needs a sparse map.
 TEST(ReconstructionPlan, SparseSequenceUsesEveryViewWithin5Degrees) {
   const ReconstructionPlan plan = ReconstructionPlan::Compute(Arc(100, 0.8), Box(), PipelineOptions());
-  for (int k = 0; k < 100; ++k) EXPECT_TRUE(plan.OnGrid(k) && plan.Selected(k));
+  for (int k = 0; k < 100; ++k) {
+    EXPECT_TRUE(plan.OnGrid(k)) << k;
+    EXPECT_EQ(plan.Selected(k), k % 2 == 0) << k;
+    EXPECT_EQ(plan.NeedsSparse(k), k % 2 == 0) << k;
+  }
   EXPECT_EQ(plan.DepthNeighbours(50).size(), 12u);
-  EXPECT_EQ(plan.Voters(50).size(), 36u);
+  EXPECT_EQ(plan.Voters(50).size(), 18u);
+  for (int j : plan.Voters(50)) EXPECT_EQ(j % 2, 0) << j;
   EXPECT_EQ(plan.PhotoNeighbours(50).size(), 12u);
 }
 
