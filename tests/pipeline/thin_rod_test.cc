@@ -82,11 +82,16 @@ TEST(ThinRod, KeptWithoutBackgroundSheetsCleanAndDegraded) {
   // from it and drops P@10 below 0.95 (V is the rod's 6 cm column); the
   // degraded rod's own noisy depths thicken it along the views' mean
   // direction (a fifth of a loop constrains depth least) to 5-6.4 mm from
-  // its surface, which P@5 > 0.88 bounds.
+  // its surface, which P@5 > 0.88 bounded. 2026-12-04, with the vote
+  // saturation relative to the window (a quarter of it, 7.1 votes here; it was 10,
+  // a third of this rod's 28-view window): clean P 0.990, thin R 0.901;
+  // degraded P 0.862 (P@10 1.000), thin R 0.728 -- more of the rod kept, a
+  // little thicker; P@5 > 0.84 bounds it (on a whole loop, the quality
+  // table's thin-degraded set, P@5 is 1.000).
   EXPECT_GT(clean.precision, 0.95);
   EXPECT_GT(clean.thin_recall, 0.30);
   EXPECT_GT(degraded.precision_10mm, 0.95);
-  EXPECT_GT(degraded.precision, 0.88);
+  EXPECT_GT(degraded.precision, 0.84);
   EXPECT_GT(degraded.thin_recall, 0.25);
 }
 
