@@ -125,7 +125,7 @@ TEST_F(StreamTest, StreamOfDenseArcEqualsRun) {
      std::to_string(kVoxelMm) + " --out " + run_dir.string());
   const nlohmann::json report = nlohmann::json::parse(ReadFileBytes(run_dir / "report.json"));
   const int selected = report["views"]["processed"];
-  EXPECT_EQ(selected, kFrames / 2);
+  EXPECT_EQ(selected, kFrames / 4);  // 0.3° apart, selected >= 1° apart: every fourth view
   StartStack({}, true);
   const fs::path stats = tmp_.path() / "stats.json", follow = tmp_.path() / "follow.ply";
   const std::string out = Sh(kBin + "lfrecon -q stream --ingest " + ing_ + " --aggregate " + agg_ + " --dataset " +
@@ -197,7 +197,7 @@ TEST_F(StreamTest, GrowingPlanFusesWhileStreamingAndEqualsRun) {
      run_dir.string());
   const nlohmann::json report = nlohmann::json::parse(ReadFileBytes(run_dir / "report.json"));
   const int selected = report["views"]["processed"];
-  EXPECT_EQ(selected, kFrames / 2);
+  EXPECT_EQ(selected, (kFrames + 3) / 4);  // every fourth view (0.3° apart, selected >= 1°): 0, 4, ..., 88
   const TriangleMesh run_mesh = ReadPly(run_dir / "mesh_raw.ply");
   ASSERT_GT(run_mesh.triangles.size(), 100u);
   auto largest_difference = [&](const TriangleMesh& m) {
@@ -284,9 +284,9 @@ TEST_F(StreamTest, GrowingPlanFusesWhileStreamingAndEqualsRun) {
   procs_[0]->Kill(SIGKILL);
   Start("lfrecon-aggregate", {"--bind", agg_, "--store", store_.string()});
   for (int k = kBeforeKill; k < kFrames; ++k) client.Push(frames[static_cast<std::size_t>(k)], milliseconds(10000));
-  // Every frame is in, the end not yet: the views before frame 90 - 2 gaps (every second one) are
+  // Every frame is in, the end not yet: the views before frame 90 - 2 gaps (every fourth one) are
   // settled and all get fused; the rest wait for the end.
-  const unsigned settled_views = (kFrames - 2 * kGap) / 2;
+  const unsigned settled_views = (kFrames - 2 * kGap) / 4;
   for (int i = 0; i < 1200 && Status(job2).views_fused() < settled_views; ++i)
     std::this_thread::sleep_for(milliseconds(100));
   std::this_thread::sleep_for(milliseconds(500));
