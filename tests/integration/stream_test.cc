@@ -240,7 +240,9 @@ TEST_F(StreamTest, GrowingPlanFusesWhileStreamingAndEqualsRun) {
     if (s.state() == pb::STATE_INGESTING && s.views_fused() > 0) {
       if (fused_open == 0) frames_first_fused = static_cast<int>(s.frames_spooled());
       fused_open = std::max<int>(fused_open, static_cast<int>(s.views_fused()));
-      message_open = s.message();
+      // The first such status: at the stream's very end the aggregator may have read its
+      // end (the whole plan) before ingest's notice moves the state on, with no message.
+      if (message_open.empty()) message_open = s.message();
       const long v = export_vertices(job);
       if (Status(job).state() == pb::STATE_INGESTING && v > 0) exports_open.push_back(v);
       if (fs::exists(follow) && Status(job).state() == pb::STATE_INGESTING)
