@@ -296,7 +296,12 @@ TEST_F(StreamTest, GrowingPlanFusesWhileStreamingAndEqualsRun) {
   EXPECT_EQ(open_all.state(), pb::STATE_INGESTING);
   EXPECT_EQ(open_all.views_fused(), settled_views);
   const long vertices_open = export_vertices(job2);
-  EXPECT_GT(vertices_open, vertices_before);
+  // The restarted aggregator fused more views into the open stream's mesh. Not "more vertices":
+  // a mesh from a few views 1.2° apart is rougher and can have more (4010 after 4 views, 3825
+  // after 15, measured), and the end is checked against lfrecon run's mesh below.
+  EXPECT_GT(open_all.views_fused(), before.views_fused());
+  EXPECT_GT(vertices_open, 0);
+  EXPECT_NE(vertices_open, vertices_before);
   EXPECT_EQ(client.End(kFrames, milliseconds(60000)).num_frames(), static_cast<unsigned>(kFrames));
   for (int i = 0; i < 1200 && !(s = Status(job2), s.state() == pb::STATE_DONE || s.state() == pb::STATE_FAILED); ++i)
     std::this_thread::sleep_for(milliseconds(100));
