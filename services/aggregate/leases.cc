@@ -80,10 +80,9 @@ pb::Envelope Aggregator::HandleTaskRequest(const pb::Envelope& req, const Worker
   }
   // A worker's first request is logged: operators see who serves, and a test
   // can wait until every worker it started has been heard from.
-  if (seen.emplace(worker.id, Clock::now()).second)
+  if (seen.insert_or_assign(worker.id, Clock::now()).second)
     spdlog::info("aggregate: {} worker {} asks for tasks", stage == pb::STAGE_DEPTH ? "depth" : "propagate",
                  worker.label);
-  seen[worker.id] = Clock::now();
   const bool others = OtherWorkerAlive(stage, worker.id);
   for (auto& [id, jp] : jobs_) {
     Job& job = *jp;
