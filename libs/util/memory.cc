@@ -2,6 +2,7 @@
 
 #include <malloc.h>
 
+#include <cstdlib>
 #include <fstream>
 #include <string>
 
@@ -20,11 +21,10 @@ std::int64_t ReadStatusKb(const std::string& key) {
 std::int64_t PeakRssBytes() { return ReadStatusKb("VmHWM:"); }
 std::int64_t CurrentRssBytes() { return ReadStatusKb("VmRSS:"); }
 
-void UseMmapForLargeBlocks() {
-#ifdef M_MMAP_THRESHOLD
-  // A fixed threshold also turns off glibc's dynamic raising of it.
-  mallopt(M_MMAP_THRESHOLD, 1 << 20);
-#endif
+void ConfigureHeap() {
+  if (!std::getenv("MALLOC_MMAP_THRESHOLD_")) mallopt(M_MMAP_THRESHOLD, static_cast<int>(kMmapThresholdBytes));
+  if (!std::getenv("MALLOC_TRIM_THRESHOLD_")) mallopt(M_TRIM_THRESHOLD, static_cast<int>(kTrimThresholdBytes));
+  if (!std::getenv("MALLOC_TOP_PAD_")) mallopt(M_TOP_PAD, static_cast<int>(kTopPadBytes));
 }
 
 }  // namespace lfrecon

@@ -12,7 +12,7 @@
 #include "util/logging.h"
 
 int main(int argc, char** argv) {
-  lfrecon::UseMmapForLargeBlocks();
+  lfrecon::ConfigureHeap();
   using namespace lfrecon::svc;
   CLI::App app{"lfrecon-aggregate: volume aggregator and job coordinator of the lfrecon service"};
   AggregatorOptions o;

@@ -672,7 +672,7 @@ int Serve(const IngestOptions& o) {
 }  // namespace lfrecon::svc
 
 int main(int argc, char** argv) {
-  lfrecon::UseMmapForLargeBlocks();
+  lfrecon::ConfigureHeap();
   using namespace lfrecon::svc;
   CLI::App app{"lfrecon-ingest: reads, validates, undistorts and spools the frames of submitted jobs"};
   IngestOptions o;

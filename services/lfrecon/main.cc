@@ -13,7 +13,7 @@
 #include "util/logging.h"
 
 int main(int argc, char** argv) {
-  lfrecon::UseMmapForLargeBlocks();
+  lfrecon::ConfigureHeap();
   CLI::App app{"lfrecon: meshes with thin features from dense light fields (Depth from Gradients, 3DV 2016)"};
   app.set_version_flag("--version", std::string("lfrecon ") + LFRECON_VERSION);
   app.require_subcommand(1);

@@ -14,7 +14,7 @@
 #include "util/memory.h"
 
 int main(int argc, char** argv) {
-  lfrecon::UseMmapForLargeBlocks();
+  lfrecon::ConfigureHeap();
   using namespace lfrecon;
   using namespace lfrecon::svc;
   WorkerOptions o;

@@ -76,7 +76,7 @@ void Print(const char* label, const Errors& e) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  UseMmapForLargeBlocks();
+  ConfigureHeap();
   CLI::App app("Pose error before and after pose refinement");
   std::string dataset, truth_dir;
   int frames = 0;

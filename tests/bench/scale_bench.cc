@@ -183,7 +183,7 @@ class EightBitSource : public FrameSource {
 }  // namespace lfrecon
 
 int main(int argc, char** argv) {
-  lfrecon::UseMmapForLargeBlocks();
+  lfrecon::ConfigureHeap();
   std::string mode = "exact", scene = "tabletop", mesh_out;
   DenseConsistencyOptions consistency;
   int max_frame_gap = StreamingDepthOptions{}.max_frame_gap;
