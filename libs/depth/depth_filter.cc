@@ -6,6 +6,7 @@
 #include <algorithm>
 #include <cmath>
 
+#include "geometry/rigid3.h"
 #include "util/error.h"
 
 namespace lfrecon {
@@ -135,8 +136,7 @@ double FullWindowViews(const std::vector<Eigen::Vector3d>& voters, double max_vi
   const double n = static_cast<double>(voters.size());
   std::vector<double> steps;
   for (std::size_t k = 1; k < voters.size(); ++k)
-    steps.push_back(std::acos(std::clamp(voters[k].normalized().dot(voters[k - 1].normalized()), -1.0, 1.0)) *
-                    180.0 / M_PI);
+    steps.push_back(AngleBetweenDeg(voters[k], voters[k - 1]));
   if (steps.empty()) return std::max(1.0, n);
   std::nth_element(steps.begin(), steps.begin() + steps.size() / 2, steps.end());
   const double step = steps[steps.size() / 2];

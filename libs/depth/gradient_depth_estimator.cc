@@ -15,6 +15,7 @@
 #endif
 
 #include "depth/image_sampling.h"
+#include "geometry/view_graph.h"
 #include "util/error.h"
 
 namespace lfrecon {
@@ -37,24 +38,17 @@ void GradientDepthOptions::Check() const {
 }
 
 namespace {
-double AngleDeg(const Eigen::Vector3d& a, const Eigen::Vector3d& b) {
-  return std::acos(std::clamp(a.dot(b), -1.0, 1.0)) * 180.0 / M_PI;
-}
 // At least `step` degrees apart, up to rounding: a sequence spaced exactly
 // `step` apart (the plane rig's 0.5°) is not thinned.
 bool AtLeastStep(double angle_deg, double step_deg) { return angle_deg >= step_deg - 1e-6; }
 }  // namespace
 
 std::vector<char> HierarchyGrid(const std::vector<PinholeView>& views, const GradientDepthOptions& o) {
-  std::vector<char> grid(views.size(), 1);
-  if (!o.use_hierarchy || !(o.level_min_step_deg > 0) || views.empty()) return grid;
-  Eigen::Vector3d last = views[0].ViewingDirection();
-  for (size_t k = 1; k < views.size(); ++k) {
-    const Eigen::Vector3d d = views[k].ViewingDirection();
-    grid[k] = AtLeastStep(AngleDeg(d, last), o.level_min_step_deg);
-    if (grid[k]) last = d;
-  }
-  return grid;
+  if (!o.use_hierarchy) return std::vector<char>(views.size(), 1);
+  std::vector<Eigen::Vector3d> dirs;
+  dirs.reserve(views.size());
+  for (const PinholeView& v : views) dirs.push_back(v.ViewingDirection());
+  return SpacedAtLeast(dirs, o.level_min_step_deg);
 }
 
 std::vector<int> SelectHierarchyViews(const PinholeView& vi, const std::vector<const PinholeView*>& neighbors,
@@ -69,7 +63,7 @@ std::vector<int> SelectHierarchyViews(const PinholeView& vi, const std::vector<c
   for (size_t q = 0; q < neighbors.size(); ++q) {
     if (!neighbors[q]) continue;
     const Eigen::Vector3d dir = neighbors[q]->ViewingDirection();
-    const double angle = AngleDeg(dir_i, dir);
+    const double angle = AngleBetweenDeg(dir_i, dir);
     if (angle > o.max_view_angle_deg) continue;
     const Eigen::Vector3d baseline = neighbors[q]->Center() - vi.Center();
     if (baseline.norm() < 1e-9) continue;  // coincident camera: no parallax
@@ -112,7 +106,7 @@ std::vector<int> SelectHierarchyViews(const PinholeView& vi, const std::vector<c
     if (std::find(first_level.begin(), first_level.end(), k) != first_level.end() || !grid(pairs[k])) continue;
     const int side = side_of(pairs[k]);
     const bool far_enough = pairs[k].angle >= o.level_angle_ratio * last_angle[side] &&
-                            (!thin || AtLeastStep(AngleDeg(pairs[k].dir, last_dir[side]), o.level_min_step_deg));
+                            (!thin || AtLeastStep(AngleBetweenDeg(pairs[k].dir, last_dir[side]), o.level_min_step_deg));
     if (far_enough || static_cast<int>(k) == farthest[side]) {
       order.push_back(pairs[k].index);
       last_angle[side] = pairs[k].angle;
@@ -719,7 +713,7 @@ DepthMap GradientDepthEstimator::Estimate(const ViewImage& reference, const std:
     pg.g = pg.A_inv * pg.a;
     pg.r3 = pg.A_inv.row(2);
     pg.r3a = pg.r3.dot(pg.a);
-    pg.angle_deg = AngleDeg(vi.ViewingDirection(), nb->view.ViewingDirection());
+    pg.angle_deg = AngleBetweenDeg(vi.ViewingDirection(), nb->view.ViewingDirection());
     pairs.push_back(pg);
   }
   if (pairs.empty()) {

@@ -57,10 +57,12 @@ DepthPlan PlanDepth(const std::vector<PinholeView>& views, const StreamingDepthO
   plan.voters.assign(n, {});
   if (options.run_filter) {
     const ViewGraph wide(dirs, options.filter.max_view_angle_deg, options.max_frame_gap);
-    GradientDepthOptions voter_spacing = options.gradient;  // the grid's greedy spacing, at the voters' step
-    voter_spacing.level_min_step_deg = std::max(voter_spacing.level_min_step_deg, options.voter_min_step_deg);
-    const std::vector<char> can_vote =
-        options.voter_min_step_deg > 0 ? HierarchyGrid(views, voter_spacing) : plan.on_grid;
+    // At the voters' step: the same greedy spacing as the plan's view
+    // selection (SpacedAtLeast), so the voters are the selected views.
+    const double grid_step = options.gradient.use_hierarchy ? options.gradient.level_min_step_deg : 0.0;
+    const std::vector<char> can_vote = options.voter_min_step_deg > 0
+                                           ? SpacedAtLeast(dirs, std::max(grid_step, options.voter_min_step_deg))
+                                           : plan.on_grid;
     for (int i : wanted) {
       plan.voters[i] = FilterVoters(wide, can_vote, i);
       std::sort(plan.voters[i].begin(), plan.voters[i].end());

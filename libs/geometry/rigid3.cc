@@ -37,9 +37,12 @@ Eigen::Vector3d ViewingDirection(const Rigid3d& cam_from_world) {
   return cam_from_world.rotation.inverse() * Eigen::Vector3d::UnitZ();
 }
 
+double AngleBetweenDeg(const Eigen::Vector3d& a, const Eigen::Vector3d& b) {
+  return std::atan2(a.cross(b).norm(), a.dot(b)) * 180.0 / M_PI;
+}
+
 double ViewAngleDeg(const Rigid3d& a, const Rigid3d& b) {
-  const double c = std::clamp(ViewingDirection(a).dot(ViewingDirection(b)), -1.0, 1.0);
-  return std::acos(c) * 180.0 / M_PI;
+  return AngleBetweenDeg(ViewingDirection(a), ViewingDirection(b));
 }
 
 Rigid3d LookAt(const Eigen::Vector3d& eye, const Eigen::Vector3d& target, const Eigen::Vector3d& up) {

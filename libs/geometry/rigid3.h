@@ -26,6 +26,10 @@ Rigid3d operator*(const Rigid3d& a, const Rigid3d& b);
 Eigen::Vector3d CameraCenter(const Rigid3d& cam_from_world);
 // Unit viewing direction (camera +z axis) in world coordinates.
 Eigen::Vector3d ViewingDirection(const Rigid3d& cam_from_world);
+// Angle in degrees between two directions (of any length). The atan2 form
+// stays accurate for the tiny angles between neighbouring frames, where
+// acos(dot) loses precision.
+double AngleBetweenDeg(const Eigen::Vector3d& a, const Eigen::Vector3d& b);
 // Angle in degrees between the viewing directions of two views.
 double ViewAngleDeg(const Rigid3d& a_from_world, const Rigid3d& b_from_world);
 // cam_from_world pose of a camera at `eye` looking at `target` with world `up`

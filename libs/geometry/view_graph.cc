@@ -6,18 +6,15 @@
 #include <cstdlib>
 #include <unordered_map>
 
+#include "geometry/rigid3.h"
+
 namespace lfrecon {
 namespace {
-
-double AngleBetween(const Eigen::Vector3d& a, const Eigen::Vector3d& b) {
-  // atan2 form: accurate for tiny angles, where acos(dot) loses precision.
-  return std::atan2(a.cross(b).norm(), a.dot(b)) * 180.0 / M_PI;
-}
 
 void SortByAngle(const std::vector<Eigen::Vector3d>& dirs, int i, std::vector<int>* list) {
   std::vector<std::pair<double, int>> keyed;
   keyed.reserve(list->size());
-  for (int j : *list) keyed.emplace_back(AngleBetween(dirs[i], dirs[j]), j);
+  for (int j : *list) keyed.emplace_back(AngleBetweenDeg(dirs[i], dirs[j]), j);
   std::sort(keyed.begin(), keyed.end());
   for (size_t k = 0; k < keyed.size(); ++k) (*list)[k] = keyed[k].second;
 }
@@ -58,14 +55,14 @@ ViewGraph::ViewGraph(const std::vector<Eigen::Vector3d>& directions, double max_
           for (const auto& [cj, j] : it->second) {
             if (j == i || cj != c) continue;  // cj != c: hash collision
             if (max_index_gap > 0 && std::abs(j - i) > max_index_gap) continue;
-            if (AngleBetween(directions_[i], directions_[j]) <= max_angle_deg) neighbors_[i].push_back(j);
+            if (AngleBetweenDeg(directions_[i], directions_[j]) <= max_angle_deg) neighbors_[i].push_back(j);
           }
         }
     SortByAngle(directions_, i, &neighbors_[i]);
   }
 }
 
-double ViewGraph::AngleDeg(int i, int j) const { return AngleBetween(directions_.at(i), directions_.at(j)); }
+double ViewGraph::AngleDeg(int i, int j) const { return AngleBetweenDeg(directions_.at(i), directions_.at(j)); }
 
 std::vector<std::vector<int>> ViewGraph::BruteForce(const std::vector<Eigen::Vector3d>& directions,
                                                     double max_angle_deg) {
@@ -75,10 +72,21 @@ std::vector<std::vector<int>> ViewGraph::BruteForce(const std::vector<Eigen::Vec
   std::vector<std::vector<int>> out(n);
   for (int i = 0; i < n; ++i) {
     for (int j = 0; j < n; ++j)
-      if (j != i && AngleBetween(dirs[i], dirs[j]) <= max_angle_deg) out[i].push_back(j);
+      if (j != i && AngleBetweenDeg(dirs[i], dirs[j]) <= max_angle_deg) out[i].push_back(j);
     SortByAngle(dirs, i, &out[i]);
   }
   return out;
+}
+
+std::vector<char> SpacedAtLeast(const std::vector<Eigen::Vector3d>& directions, double min_step_deg) {
+  std::vector<char> kept(directions.size(), 1);
+  if (!(min_step_deg > 0) || directions.empty()) return kept;
+  Eigen::Vector3d last = directions[0];
+  for (std::size_t k = 1; k < directions.size(); ++k) {
+    kept[k] = AngleBetweenDeg(directions[k], last) >= min_step_deg - 1e-6;
+    if (kept[k]) last = directions[k];
+  }
+  return kept;
 }
 
 }  // namespace lfrecon

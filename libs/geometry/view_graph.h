@@ -36,4 +36,12 @@ class ViewGraph {
   double max_angle_deg_ = 0;
 };
 
+// Greedy thinning along a sequence of directions: the first one, then each
+// one at least min_step_deg from the last one kept, up to 1e-6° of rounding
+// (a sequence spaced exactly the step apart keeps every entry). Every entry
+// is kept when min_step_deg <= 0. The view selection of the plan and the
+// depth hierarchy's grid both space views so, and the filter's voters are
+// then exactly the selected views.
+std::vector<char> SpacedAtLeast(const std::vector<Eigen::Vector3d>& directions, double min_step_deg);
+
 }  // namespace lfrecon

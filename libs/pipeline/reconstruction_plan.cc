@@ -19,18 +19,12 @@ std::vector<int> SelectViews(const std::vector<PinholeView>& views, const ViewSe
     for (int i = 0; i < n; ++i) out.push_back(i);
     return out;
   }
-  if (n == 0) return out;
-  out.push_back(0);
-  Eigen::Vector3d last = views[0].ViewingDirection();
-  for (int k = 1; k < n; ++k) {
-    const Eigen::Vector3d d = views[static_cast<std::size_t>(k)].ViewingDirection();
-    const double angle = std::acos(std::clamp(d.dot(last), -1.0, 1.0)) * 180.0 / M_PI;
-    // Up to rounding, as HierarchyGrid: a sequence spaced exactly the step apart keeps every view.
-    if (angle >= o.min_step_deg - 1e-6) {
-      out.push_back(k);
-      last = d;
-    }
-  }
+  std::vector<Eigen::Vector3d> dirs;
+  dirs.reserve(views.size());
+  for (const PinholeView& v : views) dirs.push_back(v.ViewingDirection());
+  const std::vector<char> kept = SpacedAtLeast(dirs, o.min_step_deg);
+  for (int k = 0; k < n; ++k)
+    if (kept[static_cast<std::size_t>(k)]) out.push_back(k);
   return out;
 }
 

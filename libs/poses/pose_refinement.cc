@@ -316,7 +316,6 @@ PoseRefinementResult RefinePoses(FrameSource& frames, const std::vector<PinholeV
   };
   std::vector<Point> points;
   std::vector<double> distances;
-  const double min_angle = options.min_triangulation_angle_deg * M_PI / 180.0;
   double sq_before = 0;
   std::int64_t count_before = 0;
   std::vector<double> err_before;
@@ -331,7 +330,7 @@ PoseRefinementResult RefinePoses(FrameSource& frames, const std::vector<PinholeV
     const PinholeView& first = views[static_cast<std::size_t>(p.obs.front().frame)];
     const PinholeView& last = views[static_cast<std::size_t>(p.obs.back().frame)];
     const Eigen::Vector3d r1 = (p.X - first.Center()).normalized(), r2 = (p.X - last.Center()).normalized();
-    if (std::acos(std::clamp(r1.dot(r2), -1.0, 1.0)) < min_angle) continue;
+    if (AngleBetweenDeg(r1, r2) < options.min_triangulation_angle_deg) continue;
     for (const Observation& o : p.obs) {
       const double e = ReprojectionError(views[static_cast<std::size_t>(o.frame)], p.X, o.pixel);
       sq_before += e * e;
@@ -413,6 +412,7 @@ PoseRefinementResult RefinePoses(FrameSource& frames, const std::vector<PinholeV
   solver.minimizer_progress_to_stdout = false;
   ceres::Solver::Summary summary;
   ceres::Solve(solver, &problem, &summary);
+  spdlog::debug("pose refinement, first round: {}", summary.FullReport());
   if (summary.IsSolutionUsable() && options.outlier_sigmas > 0) {
     // Second round without the observations the first one could not explain
     // (corners on occlusion edges, which are no fixed point): beyond
@@ -435,6 +435,7 @@ PoseRefinementResult RefinePoses(FrameSource& frames, const std::vector<PinholeV
     st.outlier_observations = removed;
     ceres::Solve(solver, &problem, &summary);
   }
+  spdlog::debug("pose refinement: {}", summary.FullReport());
   st.converged = summary.termination_type == ceres::CONVERGENCE;
   st.seconds_solve = timer.Seconds();
   if (!summary.IsSolutionUsable()) {

@@ -33,8 +33,7 @@ inline UsableNeighbors FindUsableNeighbors(const std::vector<const ViewImage*>& 
 // Degrees between the viewing directions, or a negative value when `nb` is
 // not to be used with `ref` (beyond the angle, or at the reference's centre).
 inline double UsableAngle(const PinholeView& ref, const PinholeView& nb, double max_angle_deg) {
-  const double cosang = std::clamp(ref.ViewingDirection().dot(nb.ViewingDirection()), -1.0, 1.0);
-  const double angle = std::acos(cosang) * 180.0 / M_PI;
+  const double angle = AngleBetweenDeg(ref.ViewingDirection(), nb.ViewingDirection());
   if (angle > max_angle_deg) return -1;
   if ((nb.Center() - ref.Center()).norm() < 1e-9) return -1;  // the reference itself
   return angle;

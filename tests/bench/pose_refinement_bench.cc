@@ -92,7 +92,10 @@ int main(int argc, char** argv) {
   app.add_option("--fb-px", o.max_forward_backward_px);
   app.add_option("--local-mean-frames", o.local_mean_frames);
   app.add_option("--outlier-sigmas", o.outlier_sigmas);
+  bool verbose = false;
+  app.add_flag("-v,--verbose", verbose, "Debug logging (the adjustment's full report)");
   CLI11_PARSE(app, argc, argv);
+  if (verbose) spdlog::set_level(spdlog::level::debug);
   try {
     DatasetOptions d;
     d.dataset_dir = dataset;

@@ -132,6 +132,41 @@ TEST(StreamingDepth, FilterVotersAreTheGridViewsWithin15Degrees) {
   }
 }
 
+TEST(StreamingDepth, VoterStepMakesTheSpacedViewsTheOnlyVoters) {
+  // 1200 frames a loop: 0.3° apart. Voters at least 1° apart are every fourth
+  // view (SpacedAtLeast, as the plan's view selection), with or without the
+  // hierarchy grid (0.5°, every second view), and only they and the wanted
+  // views need sparse maps.
+  const auto seq = SmallSequence(1200);
+  std::vector<PinholeView> views;
+  std::vector<Eigen::Vector3d> dirs;
+  for (int i = 0; i < seq->NumFrames(); ++i) {
+    views.push_back(seq->View(i));
+    dirs.push_back(views.back().ViewingDirection());
+  }
+  const std::vector<char> spaced = SpacedAtLeast(dirs, 1.0);
+  std::vector<int> wanted;
+  for (int i = 0; i < 1200; ++i)
+    if (spaced[i] && i >= 300 && i < 340) wanted.push_back(i);
+  ASSERT_EQ(wanted.size(), 10u);
+  for (bool hierarchy : {true, false}) {
+    StreamingDepthOptions o;
+    o.gradient.use_hierarchy = hierarchy;
+    o.voter_min_step_deg = 1.0;
+    const DepthPlan plan = PlanDepth(views, o, wanted);
+    for (int i : wanted) {
+      EXPECT_GE(plan.voters[i].size(), 20u) << i;  // ±15° at 1.2°: ~25 (the view itself is no voter)
+      EXPECT_LE(plan.voters[i].size(), 26u) << i;
+      for (int j : plan.voters[i]) EXPECT_TRUE(spaced[j]) << "view " << i << " voter " << j << " hierarchy " << hierarchy;
+    }
+    for (int s = 0; s < 1200; ++s) {
+      if (plan.need_sparse[s]) {
+        EXPECT_TRUE(spaced[s]) << s << " hierarchy " << hierarchy;
+      }
+    }
+  }
+}
+
 TEST(StreamingDepth, ShortStreamAndBadIndexAreErrors) {
   const auto seq = SmallSequence(120);
   std::vector<PinholeView> views;

@@ -81,5 +81,49 @@ TEST(ViewGraph, SortedByAngle) {
   }
 }
 
+std::vector<Eigen::Vector3d> CircleDirections(int n, double step_deg) {
+  std::vector<Eigen::Vector3d> dirs;
+  for (int i = 0; i < n; ++i) {
+    const double a = i * step_deg * M_PI / 180.0;
+    dirs.emplace_back(std::cos(a), std::sin(a), 0.0);
+  }
+  return dirs;
+}
+
+TEST(AngleBetweenDeg, TinyAnglesAndAnyLength) {
+  const Eigen::Vector3d a(1, 0, 0);
+  for (double deg : {1e-6, 1e-3, 0.12, 30.0, 179.0}) {
+    const double r = deg * M_PI / 180.0;
+    const Eigen::Vector3d b(std::cos(r), std::sin(r), 0);
+    EXPECT_NEAR(AngleBetweenDeg(a, b), deg, 1e-9 * std::max(1.0, deg)) << deg;
+    EXPECT_NEAR(AngleBetweenDeg(3.0 * a, 0.5 * b), deg, 1e-9 * std::max(1.0, deg)) << deg;
+  }
+  EXPECT_EQ(AngleBetweenDeg(a, a), 0.0);
+  EXPECT_NEAR(AngleBetweenDeg(a, -a), 180.0, 1e-12);
+}
+
+TEST(SpacedAtLeast, GreedyAlongTheSequence) {
+  // 0.3° apart, at least 1°: every fourth (1.2°), from the first.
+  const std::vector<char> kept = SpacedAtLeast(CircleDirections(13, 0.3), 1.0);
+  std::vector<int> idx;
+  for (int k = 0; k < 13; ++k)
+    if (kept[k]) idx.push_back(k);
+  EXPECT_EQ(idx, (std::vector<int>{0, 4, 8, 12}));
+  // Spaced exactly the step apart: every entry, rounding notwithstanding.
+  for (double step : {0.12, 0.5, 0.75}) {
+    const std::vector<char> all = SpacedAtLeast(CircleDirections(200, step), step);
+    EXPECT_EQ(std::count(all.begin(), all.end(), 1), 200) << step;
+  }
+  // No step: everything; no directions: nothing.
+  const std::vector<char> none = SpacedAtLeast(CircleDirections(5, 0.1), 0.0);
+  EXPECT_EQ(std::count(none.begin(), none.end(), 1), 5);
+  EXPECT_TRUE(SpacedAtLeast({}, 1.0).empty());
+  // Measured from the last kept entry, not the previous one: an uneven path.
+  std::vector<Eigen::Vector3d> uneven = CircleDirections(1, 0);
+  for (double deg : {0.6, 1.1, 1.5, 2.2, 2.3, 3.3}) uneven.emplace_back(std::cos(deg * M_PI / 180), std::sin(deg * M_PI / 180), 0);
+  const std::vector<char> u = SpacedAtLeast(uneven, 1.0);
+  EXPECT_EQ(std::vector<char>(u.begin(), u.end()), (std::vector<char>{1, 0, 1, 0, 1, 0, 1}));
+}
+
 }  // namespace
 }  // namespace lfrecon

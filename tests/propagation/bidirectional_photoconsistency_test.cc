@@ -9,6 +9,7 @@
 #include <cstring>
 
 #include "../depth/synth_views.h"
+#include "geometry/rigid3.h"
 #include "util/error.h"
 
 namespace lfrecon {
@@ -291,8 +292,7 @@ TEST(BidirectionalPhotoconsistency, SelectsNeighboursByAngleThinnedToMaxViews) {
   double last = -1;
   for (int j : all) {
     ASSERT_GE(j, 2);
-    const double angle =
-        std::acos(std::clamp(v.ref.view.ViewingDirection().dot(views[j]->ViewingDirection()), -1.0, 1.0));
+    const double angle = AngleBetweenDeg(v.ref.view.ViewingDirection(), views[j]->ViewingDirection());
     EXPECT_GE(angle, last);
     last = angle;
   }
