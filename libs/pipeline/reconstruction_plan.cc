@@ -58,7 +58,15 @@ ReconstructionPlan ReconstructionPlan::Compute(const std::vector<PinholeView>& c
     std::vector<Eigen::Vector3d> dirs;
     for (const auto& v : cameras) dirs.push_back(v.ViewingDirection());
     const ViewGraph photo(dirs, options.propagation.photo.max_view_angle_deg, options.depth.max_frame_gap);
-    for (int i : plan.views) plan.photo[static_cast<std::size_t>(i)] = photo.Neighbors(i);
+    // Only the hierarchy grid's frames (on_grid: >= level_min_step_deg apart,
+    // every frame of a sequence >= 0.5° apart) are photoconsistency
+    // neighbours. On a dense sequence (0.12°: ~80 frames within 5°) each one
+    // was expanded, smoothed and compared for every view it serves, and held
+    // in the densification window until then; near-duplicates add little to
+    // C± (docs/benchmarks.md, "Photoconsistency neighbours on the grid").
+    for (int i : plan.views)
+      for (int j : photo.Neighbors(i))
+        if (plan.depth.on_grid[static_cast<std::size_t>(j)]) plan.photo[static_cast<std::size_t>(i)].push_back(j);
   }
   plan.color_frames = EvenlySpread(plan.views, options.color_views);
   if (options.refine && options.refine_options.carve)

@@ -58,7 +58,8 @@ struct ReconstructionPlan {
   const std::vector<int>& DepthNeighbours(int i) const { return depth.uses.at(static_cast<std::size_t>(i)); }
   // Sparse maps voting in view i's filtered map besides i's own (selected views, with the filter).
   const std::vector<int>& Voters(int i) const { return depth.voters.at(static_cast<std::size_t>(i)); }
-  // Frames within the photoconsistency angle of view i (selected views, when densifying), nearest first.
+  // Frames on the hierarchy grid (OnGrid) within the photoconsistency angle of
+  // view i (selected views, when densifying), nearest first.
   const std::vector<int>& PhotoNeighbours(int i) const { return photo.at(static_cast<std::size_t>(i)); }
 
   std::vector<char> selected;  // per frame: gets depth, densification and fusion
