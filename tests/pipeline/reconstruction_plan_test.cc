@@ -82,7 +82,10 @@ TEST(ReconstructionPlan, DenseArcNeighboursAndGridAgainstHandCounts) {
   EXPECT_EQ(plan.Voters(s).front(), 58);
   EXPECT_EQ(plan.Voters(s).back(), 142);
   for (int j : plan.Voters(s)) EXPECT_EQ(j % 2, 0);
-  EXPECT_EQ(plan.PhotoNeighbours(s).size(), 28u);
+  // Photoconsistency neighbours: the grid's frames within 5° (14 per side before
+  // docs/benchmarks.md "Photoconsistency neighbours on the grid", 7 now).
+  EXPECT_EQ(plan.PhotoNeighbours(s).size(), 14u);
+  for (int j : plan.PhotoNeighbours(s)) EXPECT_EQ(j % 2, 0) << j;
   EXPECT_EQ(plan.depth.read_before_emit[s], 114);
   // Views not selected have no entries; an end view has one side only.
   EXPECT_TRUE(plan.DepthNeighbours(101).empty());
