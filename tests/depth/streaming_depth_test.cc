@@ -18,6 +18,16 @@ std::shared_ptr<synth::SynthSequence> SmallSequence(int frames) {
   return std::make_shared<synth::SynthSequence>(synth::SynthSequence::Create(o));
 }
 
+// The sequence's views and their viewing directions.
+std::pair<std::vector<PinholeView>, std::vector<Eigen::Vector3d>> ViewsAndDirections(const synth::SynthSequence& seq) {
+  std::pair<std::vector<PinholeView>, std::vector<Eigen::Vector3d>> out;
+  for (int i = 0; i < seq.NumFrames(); ++i) {
+    out.first.push_back(seq.View(i));
+    out.second.push_back(out.first.back().ViewingDirection());
+  }
+  return out;
+}
+
 TEST(StreamingDepth, EmitsEveryWantedViewOnceWithBoundedWindow) {
   const auto seq = SmallSequence(360);  // 1° apart: ~10 within 5°, ~30 within 15°
   std::vector<PinholeView> views;
@@ -70,12 +80,7 @@ TEST(StreamingDepth, DenseSequenceHoldsOnlyTheHierarchyGrid) {
   // stage holds, a fraction of them; every frame within 5° is still tapped
   // before its view is emitted.
   const auto seq = SmallSequence(3000);
-  std::vector<PinholeView> views;
-  std::vector<Eigen::Vector3d> dirs;
-  for (int i = 0; i < seq->NumFrames(); ++i) {
-    views.push_back(seq->View(i));
-    dirs.push_back(views.back().ViewingDirection());
-  }
+  const auto [views, dirs] = ViewsAndDirections(*seq);
   const ViewGraph near(dirs, 5.0);
   const std::vector<int> wanted = {150, 160};
   auto run = [&](double step, std::vector<int>* emitted) {
@@ -110,12 +115,7 @@ TEST(StreamingDepth, DenseSequenceHoldsOnlyTheHierarchyGrid) {
 TEST(StreamingDepth, FilterVotersAreTheGridViewsWithin15Degrees) {
   for (int frames : {480, 3000}) {  // 0.75° apart: every view votes; 0.12°: the grid (≥ 0.5°) only
     const auto seq = SmallSequence(frames);
-    std::vector<PinholeView> views;
-    std::vector<Eigen::Vector3d> dirs;
-    for (int i = 0; i < seq->NumFrames(); ++i) {
-      views.push_back(seq->View(i));
-      dirs.push_back(views.back().ViewingDirection());
-    }
+    const auto [views, dirs] = ViewsAndDirections(*seq);
     const ViewGraph wide(dirs, DepthFilterOptions().max_view_angle_deg);
     const std::vector<char> grid = HierarchyGrid(views, GradientDepthOptions());
     const std::vector<int> voters = FilterVoters(wide, grid, frames / 2);
@@ -138,12 +138,7 @@ TEST(StreamingDepth, VoterStepMakesTheSpacedViewsTheOnlyVoters) {
   // hierarchy grid (0.5°, every second view), and only they and the wanted
   // views need sparse maps.
   const auto seq = SmallSequence(1200);
-  std::vector<PinholeView> views;
-  std::vector<Eigen::Vector3d> dirs;
-  for (int i = 0; i < seq->NumFrames(); ++i) {
-    views.push_back(seq->View(i));
-    dirs.push_back(views.back().ViewingDirection());
-  }
+  const auto [views, dirs] = ViewsAndDirections(*seq);
   const std::vector<char> spaced = SpacedAtLeast(dirs, 1.0);
   std::vector<int> wanted;
   for (int i = 0; i < 1200; ++i)
