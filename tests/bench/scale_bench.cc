@@ -29,7 +29,12 @@
 //   processes the views of the hierarchy grid (0.6° apart), whose sparse maps the filter
 //   needs anyway.
 // --8bit (pipeline mode): frames quantized to 8 bits as decoded PNG/video frames
-//   are (the renderer's are float); --no-compact: PipelineOptions::compact_frames
+//   are (the renderer's are float); --frames-dir DIR (pipeline mode): the frames
+//   are first rendered to DIR/frame_NNNNN.png (8-bit, untimed; frames already
+//   there are kept, DIR/scale_bench.txt names the sequence they belong to), then
+//   the pipeline reads them back from the folder as `lfrecon run` does: the
+//   product's time on a folder or decoded video, without the ~0.25 s per 720p
+//   frame the renderer costs (the same 8-bit frames as --8bit); --no-compact: PipelineOptions::compact_frames
 //   off (windows hold CV_32FC3 frames).
 // Every --report-every frames it prints the cumulative seconds per stage, the
 // fusion's grid and store sizes, and the current and peak RSS.
@@ -42,6 +47,8 @@
 #include <memory>
 #include <cmath>
 #include <filesystem>
+#include <fstream>
+#include <iterator>
 #include <optional>
 #include <sstream>
 #include <string>
@@ -179,12 +186,61 @@ class EightBitSource : public FrameSource {
   }
   FrameSource* inner_;
 };
+
+std::string SequenceStamp(const std::string& scene, int frames, int width, int height, double loops) {
+  char buf[256];
+  std::snprintf(buf, sizeof buf, "scene %s, frames %d, %dx%d, loops %.6g\n", scene.c_str(), frames, width, height,
+                loops);
+  return buf;
+}
+
+// Renders every frame of `source` that `dir` lacks to dir/frame_NNNNN.png (8
+// bits) and returns a source reading them back. Refuses a folder whose stamp
+// names another sequence, so a stale folder is never measured by mistake.
+std::unique_ptr<ImageFolderSource> RenderToFolder(FrameSource* source, const std::filesystem::path& dir,
+                                                  const std::string& stamp) {
+  namespace fs = std::filesystem;
+  fs::create_directories(dir);
+  const fs::path stamp_path = dir / "scale_bench.txt";
+  if (fs::exists(stamp_path)) {
+    std::ifstream in(stamp_path);
+    const std::string old((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    if (old != stamp) {
+      std::fprintf(stderr, "%s holds frames of another sequence (%s); use another --frames-dir\n",
+                   dir.string().c_str(), old.c_str());
+      std::exit(2);
+    }
+  } else {
+    std::ofstream(stamp_path) << stamp;
+  }
+  const int n = source->NumFrames();
+  std::vector<std::string> names;
+  Timer t;
+  int rendered = 0;
+  for (int i = 0; i < n; ++i) {
+    char name[32];
+    std::snprintf(name, sizeof name, "frame_%05d.png", i);
+    names.push_back(name);
+    if (fs::exists(dir / name)) continue;
+    const fs::path tmp = dir / (std::string(name) + ".tmp.png");  // a cut-off run leaves no half-written frame
+    WriteImageFloat(tmp, source->Read(i).image);
+    fs::rename(tmp, dir / name);
+    if (++rendered % 250 == 0) {
+      std::printf("rendered %d frames to %s, %.1f s\n", rendered, dir.string().c_str(), t.Seconds());
+      std::fflush(stdout);
+    }
+  }
+  std::printf("frames: %d in %s (%d rendered now, %.1f s, untimed)\n", n, dir.string().c_str(), rendered,
+              t.Seconds());
+  std::fflush(stdout);
+  return std::make_unique<ImageFolderSource>(dir, std::move(names));
+}
 }  // namespace
 }  // namespace lfrecon
 
 int main(int argc, char** argv) {
   lfrecon::ConfigureHeap();
-  std::string mode = "exact", scene = "tabletop", mesh_out;
+  std::string mode = "exact", scene = "tabletop", mesh_out, frames_dir;
   DenseConsistencyOptions consistency;
   int max_frame_gap = StreamingDepthOptions{}.max_frame_gap;
   int frames = 3000, width = 1280, height = 720, divisions = 256, report_every = 250, threads = 0, max_block = 16;
@@ -217,6 +273,7 @@ int main(int argc, char** argv) {
     else if (k == "--eval") eval = true;
     else if (k == "--no-refine") refine = false;
     else if (k == "--8bit") eight_bit = true;
+    else if (k == "--frames-dir") frames_dir = value();
     else if (k == "--consistency") {  // views,rho_min,patch_radius_px of the dense check (views 0: off)
       std::sscanf(value().c_str(), "%d,%lf,%d", &consistency.views, &consistency.rho_min,
                   &consistency.patch_radius_px);
@@ -380,7 +437,14 @@ int main(int argc, char** argv) {
   });
   synth::SynthFrameSource synth_source(seq);
   EightBitSource eight_bit_source(&synth_source);
-  FrameSource& source = eight_bit ? static_cast<FrameSource&>(eight_bit_source) : synth_source;
+  std::unique_ptr<ImageFolderSource> folder_source;
+  if (!frames_dir.empty()) {
+    folder_source = RenderToFolder(&synth_source, frames_dir, SequenceStamp(scene, frames, width, height, loops));
+    total = Timer();  // the rendering is not the pipeline's time
+  }
+  FrameSource& source = folder_source ? static_cast<FrameSource&>(*folder_source)
+                        : eight_bit   ? static_cast<FrameSource&>(eight_bit_source)
+                                      : synth_source;
   const PipelineResult r = pipeline.Run(source);
   const PipelineStats& st = r.stats;
   const double n = st.views;
