@@ -37,18 +37,9 @@ void GradientDepthOptions::Check() const {
   LFRECON_CHECK_OPTION(level_min_step_deg >= 0 && level_min_step_deg < max_view_angle_deg);
 }
 
-namespace {
-// At least `step` degrees apart, up to rounding: a sequence spaced exactly
-// `step` apart (the plane rig's 0.5°) is not thinned.
-bool AtLeastStep(double angle_deg, double step_deg) { return angle_deg >= step_deg - 1e-6; }
-}  // namespace
-
 std::vector<char> HierarchyGrid(const std::vector<PinholeView>& views, const GradientDepthOptions& o) {
   if (!o.use_hierarchy) return std::vector<char>(views.size(), 1);
-  std::vector<Eigen::Vector3d> dirs;
-  dirs.reserve(views.size());
-  for (const PinholeView& v : views) dirs.push_back(v.ViewingDirection());
-  return SpacedAtLeast(dirs, o.level_min_step_deg);
+  return SpacedAtLeast(ViewingDirections(views), o.level_min_step_deg);
 }
 
 std::vector<int> SelectHierarchyViews(const PinholeView& vi, const std::vector<const PinholeView*>& neighbors,
@@ -106,7 +97,7 @@ std::vector<int> SelectHierarchyViews(const PinholeView& vi, const std::vector<c
     if (std::find(first_level.begin(), first_level.end(), k) != first_level.end() || !grid(pairs[k])) continue;
     const int side = side_of(pairs[k]);
     const bool far_enough = pairs[k].angle >= o.level_angle_ratio * last_angle[side] &&
-                            (!thin || AtLeastStep(AngleBetweenDeg(pairs[k].dir, last_dir[side]), o.level_min_step_deg));
+                            (!thin || AtLeastStepDeg(AngleBetweenDeg(pairs[k].dir, last_dir[side]), o.level_min_step_deg));
     if (far_enough || static_cast<int>(k) == farthest[side]) {
       order.push_back(pairs[k].index);
       last_angle[side] = pairs[k].angle;

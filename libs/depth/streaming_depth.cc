@@ -44,8 +44,7 @@ DepthPlan PlanDepth(const std::vector<PinholeView>& views, const StreamingDepthO
   wanted.erase(std::unique(wanted.begin(), wanted.end()), wanted.end());
   DepthPlan plan;
   plan.wanted = wanted;
-  std::vector<Eigen::Vector3d> dirs;
-  for (const auto& v : views) dirs.push_back(v.ViewingDirection());
+  const std::vector<Eigen::Vector3d> dirs = ViewingDirections(views);
   const ViewGraph near(dirs, options.gradient.max_view_angle_deg, options.max_frame_gap);
   // The frames each sparse map uses: the estimator's own selection among the
   // views within 5°, on the sequence's hierarchy grid (level_min_step_deg), so

@@ -83,10 +83,19 @@ std::vector<char> SpacedAtLeast(const std::vector<Eigen::Vector3d>& directions, 
   if (!(min_step_deg > 0) || directions.empty()) return kept;
   Eigen::Vector3d last = directions[0];
   for (std::size_t k = 1; k < directions.size(); ++k) {
-    kept[k] = AngleBetweenDeg(directions[k], last) >= min_step_deg - 1e-6;
+    kept[k] = AtLeastStepDeg(AngleBetweenDeg(directions[k], last), min_step_deg);
     if (kept[k]) last = directions[k];
   }
   return kept;
+}
+
+bool AtLeastStepDeg(double angle_deg, double step_deg) { return angle_deg >= step_deg - 1e-6; }
+
+std::vector<Eigen::Vector3d> ViewingDirections(const std::vector<PinholeView>& views) {
+  std::vector<Eigen::Vector3d> dirs;
+  dirs.reserve(views.size());
+  for (const PinholeView& v : views) dirs.push_back(v.ViewingDirection());
+  return dirs;
 }
 
 }  // namespace lfrecon

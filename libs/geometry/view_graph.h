@@ -8,6 +8,8 @@
 #include <Eigen/Core>
 #include <vector>
 
+#include "geometry/pinhole_view.h"
+
 namespace lfrecon {
 
 class ViewGraph {
@@ -43,5 +45,10 @@ class ViewGraph {
 // depth hierarchy's grid both space views so, and the filter's voters are
 // then exactly the selected views.
 std::vector<char> SpacedAtLeast(const std::vector<Eigen::Vector3d>& directions, double min_step_deg);
+// SpacedAtLeast's rule for one pair: at least step_deg apart, up to 1e-6°.
+bool AtLeastStepDeg(double angle_deg, double step_deg);
+
+// The viewing directions of `views`, in order: what ViewGraph and SpacedAtLeast take.
+std::vector<Eigen::Vector3d> ViewingDirections(const std::vector<PinholeView>& views);
 
 }  // namespace lfrecon

@@ -19,10 +19,7 @@ std::vector<int> SelectViews(const std::vector<PinholeView>& views, const ViewSe
     for (int i = 0; i < n; ++i) out.push_back(i);
     return out;
   }
-  std::vector<Eigen::Vector3d> dirs;
-  dirs.reserve(views.size());
-  for (const PinholeView& v : views) dirs.push_back(v.ViewingDirection());
-  const std::vector<char> kept = SpacedAtLeast(dirs, o.min_step_deg);
+  const std::vector<char> kept = SpacedAtLeast(ViewingDirections(views), o.min_step_deg);
   for (int k = 0; k < n; ++k)
     if (kept[static_cast<std::size_t>(k)]) out.push_back(k);
   return out;
@@ -55,9 +52,7 @@ ReconstructionPlan ReconstructionPlan::Compute(const std::vector<PinholeView>& c
   for (int i : plan.views) plan.selected[static_cast<std::size_t>(i)] = 1;
   plan.photo.assign(static_cast<std::size_t>(n), {});
   if (options.densify) {
-    std::vector<Eigen::Vector3d> dirs;
-    for (const auto& v : cameras) dirs.push_back(v.ViewingDirection());
-    const ViewGraph photo(dirs, options.propagation.photo.max_view_angle_deg, options.depth.max_frame_gap);
+    const ViewGraph photo(ViewingDirections(cameras), options.propagation.photo.max_view_angle_deg, options.depth.max_frame_gap);
     // Only the hierarchy grid's frames (on_grid: >= level_min_step_deg apart,
     // every frame of a sequence >= 0.5° apart) are photoconsistency
     // neighbours. On a dense sequence (0.12°: ~80 frames within 5°) each one

@@ -22,9 +22,11 @@ std::int64_t PeakRssBytes() { return ReadStatusKb("VmHWM:"); }
 std::int64_t CurrentRssBytes() { return ReadStatusKb("VmRSS:"); }
 
 void ConfigureHeap() {
+#if defined(__GLIBC__)  // mallopt and these parameters are glibc's; other C libraries keep their defaults
   if (!std::getenv("MALLOC_MMAP_THRESHOLD_")) mallopt(M_MMAP_THRESHOLD, static_cast<int>(kMmapThresholdBytes));
   if (!std::getenv("MALLOC_TRIM_THRESHOLD_")) mallopt(M_TRIM_THRESHOLD, static_cast<int>(kTrimThresholdBytes));
   if (!std::getenv("MALLOC_TOP_PAD_")) mallopt(M_TOP_PAD, static_cast<int>(kTopPadBytes));
+#endif
 }
 
 }  // namespace lfrecon

@@ -61,9 +61,7 @@ int RunDepth(const DepthArgs& args) {
   std::map<int, ViewImage> window;
   std::unique_ptr<ViewGraph> near;
   if (dense) {
-    std::vector<Eigen::Vector3d> dirs;
-    for (const auto& v : views) dirs.push_back(v.ViewingDirection());
-    near = std::make_unique<ViewGraph>(dirs, popt.photo.max_view_angle_deg);
+    near = std::make_unique<ViewGraph>(ViewingDirections(views), popt.photo.max_view_angle_deg);
     for (int i : wanted) {
       ++refs[i];
       for (int j : near->Neighbors(i)) ++refs[j];
