@@ -2,6 +2,7 @@
 // time per view on a dataset with ground-truth depth (figurines or synthetic).
 //   depth_accuracy_bench DATASET [--gt-views N] [--skip K] [--threads T] [--no-hierarchy] [--no-filter]
 //                        [--every-view] [--shift-iterations N] [--voxel METRES] [--level-step DEG]
+//                        [--level-ratio R] [--reference-points K]
 // Evaluates the first N views that have ground truth (after skipping the
 // first --skip ones), streaming frames from the start of the sequence.
 // --every-view: depth (and filtering) of every view from the first to the
@@ -9,6 +10,8 @@
 // one view per filtered view); accuracy is still measured on the views with
 // ground truth only.
 // --level-step: GradientDepthOptions::level_min_step_deg (0: every view within 5°).
+// --level-ratio: GradientDepthOptions::level_angle_ratio; --reference-points:
+// GradientDepthOptions::refine_reference_points.
 #include <spdlog/spdlog.h>
 #include <tbb/global_control.h>
 
@@ -36,7 +39,8 @@ void PrintCurve(const char* name, const DepthMetrics& m) {
 int main(int argc, char** argv) {
   if (argc < 2) {
     std::fprintf(stderr, "usage: %s DATASET [--gt-views N] [--skip K] [--threads T] [--no-hierarchy] [--no-filter] "
-                 "[--every-view] [--shift-iterations N] [--voxel METRES] [--level-step DEG]\n",
+                 "[--every-view] [--shift-iterations N] [--voxel METRES] [--level-step DEG] [--level-ratio R] "
+                 "[--reference-points K]\n",
                  argv[0]);
     return 2;
   }
@@ -55,6 +59,9 @@ int main(int argc, char** argv) {
     else if (!std::strcmp(argv[a], "--shift-iterations") && a + 1 < argc) sopt.gradient.shift_iterations = std::atoi(argv[++a]);
     else if (!std::strcmp(argv[a], "--voxel") && a + 1 < argc) sopt.filter.voxel_size = std::atof(argv[++a]);
     else if (!std::strcmp(argv[a], "--level-step") && a + 1 < argc) sopt.gradient.level_min_step_deg = std::atof(argv[++a]);
+    else if (!std::strcmp(argv[a], "--level-ratio") && a + 1 < argc) sopt.gradient.level_angle_ratio = std::atof(argv[++a]);
+    else if (!std::strcmp(argv[a], "--reference-points") && a + 1 < argc)
+      sopt.gradient.refine_reference_points = std::atoi(argv[++a]);
     else {
       std::fprintf(stderr, "unknown or incomplete option %s\n", argv[a]);
       return 2;

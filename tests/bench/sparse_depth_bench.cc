@@ -6,6 +6,7 @@
 //                      [--out DIR] [--ref DIR]
 // --out: writes DIR/sparse_NNNN.bin per view (rows, cols, then depth and
 // confidence as float32 and the label as uint8, row-major).
+// --ray-stats: how many depths lie on rays that miss V (grown by 0-50 %).
 // --ref: compares each view with DIR/sparse_NNNN.bin from an earlier run:
 // pixels whose depth, confidence or label differ, max |Δdepth| (absolute and
 // relative) and max |Δconfidence|; exit status 1 when a map is missing.
@@ -21,6 +22,7 @@
 #include <cstring>
 #include <deque>
 #include <fstream>
+#include <limits>
 #include <sstream>
 #include <string>
 
@@ -58,6 +60,48 @@ bool ReadMap(const std::string& path, DepthMap* m) {
 
 }  // namespace
 
+// Does the ray from `origin` along `dir` meet `box` in front of the camera? (slab test)
+bool RayMeetsBox(const Eigen::Vector3d& origin, const Eigen::Vector3d& dir, const BoundingBox& box) {
+  double t0 = 0, t1 = std::numeric_limits<double>::infinity();
+  for (int a = 0; a < 3; ++a) {
+    if (std::abs(dir[a]) < 1e-15) {
+      if (origin[a] < box.min[a] || origin[a] > box.max[a]) return false;
+      continue;
+    }
+    double ta = (box.min[a] - origin[a]) / dir[a], tb = (box.max[a] - origin[a]) / dir[a];
+    if (ta > tb) std::swap(ta, tb);
+    t0 = std::max(t0, ta);
+    t1 = std::min(t1, tb);
+    if (t0 > t1) return false;
+  }
+  return true;
+}
+
+// Of the map's depths, how many lie on rays that miss V grown by 0, 10, 25
+// and 50 % of its largest extent on every side: pixels whose depth can never
+// be a point of V (or near it).
+void PrintRayStats(const PinholeView& view, const DepthMap& map, const BoundingBox& volume) {
+  const double margins[] = {0.0, 0.1, 0.25, 0.5};
+  long long miss[4] = {0, 0, 0, 0}, total = 0;
+  const Eigen::Vector3d centre = view.Center();
+  for (int r = 0; r < map.depth.rows; ++r)
+    for (int c = 0; c < map.depth.cols; ++c) {
+      if (!(map.depth.at<float>(r, c) > 0)) continue;
+      ++total;
+      const Eigen::Vector3d dir = view.Unproject(Eigen::Vector2d(c + 0.5, r + 0.5), 1.0) - centre;
+      for (int m = 0; m < 4; ++m) {
+        BoundingBox grown = volume;
+        const double g = margins[m] * volume.Extent().maxCoeff();
+        grown.min.array() -= g;
+        grown.max.array() += g;
+        miss[m] += !RayMeetsBox(centre, dir, grown);
+      }
+    }
+  std::printf("  depths on rays that miss V grown by 0 / 10 / 25 / 50 %%: %.1f / %.1f / %.1f / %.1f %% of %lld\n",
+              100.0 * miss[0] / std::max(total, 1LL), 100.0 * miss[1] / std::max(total, 1LL),
+              100.0 * miss[2] / std::max(total, 1LL), 100.0 * miss[3] / std::max(total, 1LL), total);
+}
+
 int main(int argc, char** argv) {
   if (argc < 2) {
     std::fprintf(stderr, "usage: %s DATASET [--views 8,16] [--threads 1] [--repeat N] [--out DIR] [--ref DIR]\n",
@@ -69,6 +113,7 @@ int main(int argc, char** argv) {
   std::vector<int> wanted = {8};
   int threads = 1, repeat = 1;
   std::string out_dir, ref_dir;
+  bool ray_stats = false;
   for (int a = 2; a < argc; ++a) {
     if (!std::strcmp(argv[a], "--views") && a + 1 < argc) {
       wanted.clear();
@@ -83,6 +128,8 @@ int main(int argc, char** argv) {
       out_dir = argv[++a];
     } else if (!std::strcmp(argv[a], "--ref") && a + 1 < argc) {
       ref_dir = argv[++a];
+    } else if (!std::strcmp(argv[a], "--ray-stats")) {
+      ray_stats = true;
     } else {
       std::fprintf(stderr, "unknown or incomplete option %s\n", argv[a]);
       return 2;
@@ -130,6 +177,7 @@ int main(int argc, char** argv) {
     const double seconds = timer.Seconds() / repeat;
     total_s += seconds;
     std::printf("view %4d: %zu neighbours, %d depths, %.1f ms\n", i, nbs.size(), map.CountValid(), 1000 * seconds);
+    if (ray_stats) PrintRayStats(views[i], map, ds.bbox());
     char name[64];
     std::snprintf(name, sizeof name, "/sparse_%04d.bin", i);
     if (!out_dir.empty() && !WriteMap(out_dir + name, map)) {
