@@ -22,22 +22,22 @@
 #include "io/dataset.h"
 #include "io/ply.h"
 #include "reference_dataset.h"
+#include "service_stack.h"
 
 namespace lfrecon::svc {
 namespace {
 namespace fs = std::filesystem;
 using lfrecon::testing::DaemonProcess;
+using lfrecon::testing::kBin;
 using lfrecon::testing::MakeReference;
 using lfrecon::testing::ReferenceDataset;
 using lfrecon::testing::RemoveReference;
 using lfrecon::testing::RunShell;
 using lfrecon::testing::ScoreAgainstReference;
+using lfrecon::testing::ServiceStackTest;
 using std::chrono::milliseconds;
 
-const std::string kBin = lfrecon::testing::BinDir();
 constexpr double kVoxelMm = lfrecon::testing::kReferenceVoxelMm;
-
-using lfrecon::testing::FreePort;
 
 pb::Envelope Ping() {
   pb::Envelope p = NewEnvelope();
@@ -88,7 +88,7 @@ ReferenceDataset* g_ref = nullptr;
 
 MeshMetrics Score(const TriangleMesh& mesh) { return ScoreAgainstReference(mesh, *g_ref); }
 
-class AuthTest : public ::testing::Test {
+class AuthTest : public ServiceStackTest {
  protected:
   static void SetUpTestSuite() {
     g_ref = new ReferenceDataset;
@@ -100,44 +100,29 @@ class AuthTest : public ::testing::Test {
   }
 
   void SetUp() override {
-    tmp_ = std::make_unique<lfrecon::testing::TempDir>();
-    store_ = tmp_->path() / "store";
+    ServiceStackTest::SetUp();
     fs::create_directories(store_);
-    keys_ = MakeKeys(tmp_->path() / "keys");
-    agg_ = "tcp://127.0.0.1:" + std::to_string(FreePort());
-    ing_ = "tcp://127.0.0.1:" + std::to_string(FreePort());
+    keys_ = MakeKeys(tmp_.path() / "keys");
+    log_tail_chars_ = std::string::npos;  // whole logs
   }
-  void TearDown() override {
-    if (HasFailure())
-      for (const auto& p : procs_) std::printf("---- %s ----\n%s\n", p->log().c_str(), p->Log().c_str());
-    procs_.clear();
-  }
+  // CURVE over loopback TCP: what is tested here (ipc:// in a private folder needs no keys).
+  std::string Endpoint(const std::string&) override { return lfrecon::testing::TcpEndpoint(); }
 
-  DaemonProcess* Start(const std::string& exe, std::vector<std::string> args) {
-    args.insert(args.begin(), kBin + exe);
-    const fs::path log = tmp_->path() / (exe + "_" + std::to_string(procs_.size()) + ".log");
-    procs_.push_back(std::make_unique<DaemonProcess>(args, log));
-    return procs_.back().get();
-  }
+  // The base's daemons with this stack's keys and allow-lists.
   DaemonProcess* StartAggregator() {
-    return Start("lfrecon-aggregate", {"--bind", agg_, "--store", store_.string(), "--lease-ms", "3000", "--key",
-                                       keys_.Key("aggregate").string(), "--allow", keys_.agg_allow.string()});
+    return ServiceStackTest::StartAggregator({"--lease-ms", "3000", "--key", keys_.Key("aggregate").string(),
+                                              "--allow", keys_.agg_allow.string()});
   }
   DaemonProcess* StartIngest() {
-    return Start("lfrecon-ingest", {"--bind", ing_, "--aggregate", agg_, "--store", store_.string(), "--key",
-                                    keys_.Key("ingest").string(), "--allow", keys_.ing_allow.string(),
-                                    "--aggregate-key", keys_.Pub("aggregate").string()});
+    return ServiceStackTest::StartIngest({"--key", keys_.Key("ingest").string(), "--allow",
+                                          keys_.ing_allow.string(), "--aggregate-key",
+                                          keys_.Pub("aggregate").string()});
   }
+  // A worker with key `key`, or none ("": --insecure).
   DaemonProcess* StartWorker(const std::string& exe, const std::string& key) {
-    std::vector<std::string> a = {"--aggregate", agg_, "--store", store_.string()};
-    if (key.empty()) {
-      a.push_back("--insecure");
-    } else {
-      for (const std::string& s : {std::string("--key"), keys_.Key(key).string(), std::string("--aggregate-key"),
-                                   keys_.Pub("aggregate").string()})
-        a.push_back(s);
-    }
-    return Start(exe, a);
+    if (key.empty()) return ServiceStackTest::StartWorker(exe, {"--insecure"});
+    return ServiceStackTest::StartWorker(
+        exe, {"--key", keys_.Key(key).string(), "--aggregate-key", keys_.Pub("aggregate").string()});
   }
   // A REQ client of `endpoint` with the key `name` (none: plain, --insecure).
   std::unique_ptr<RequestClient> Client(const std::string& endpoint, const std::string& name,
@@ -164,7 +149,7 @@ class AuthTest : public ::testing::Test {
     }
     return false;
   }
-  pb::JobStatus Status(const std::string& job) {
+  pb::JobStatus Status(const std::string& job) override {  // with the client key, a missing reply fails
     auto c = Client(agg_, "client");
     pb::Envelope req = NewEnvelope(job);
     req.mutable_status();
@@ -182,12 +167,7 @@ class AuthTest : public ::testing::Test {
     return out;
   }
 
-  zmq::context_t context_{1};
-  std::unique_ptr<lfrecon::testing::TempDir> tmp_;
-  fs::path store_;
   Keys keys_;
-  std::string agg_, ing_;
-  std::vector<std::unique_ptr<DaemonProcess>> procs_;
 };
 
 // Forged workers (no key; a key not in the allow-list) get no task while a job
@@ -226,7 +206,7 @@ TEST_F(AuthTest, ForgedWorkersGetNothingAuthenticatedStackRunsTheJob) {
   ASSERT_EQ(s.state(), pb::STATE_DONE) << s.message();
   EXPECT_EQ(s.views_fused(), static_cast<unsigned>(g_ref->views));
   EXPECT_EQ(s.leases_expired(), 0u);
-  const fs::path mesh = tmp_->path() / "mesh.ply";
+  const fs::path mesh = tmp_.path() / "mesh.ply";
   auto r = RunShell(kBin + "lfrecon -q export " + job + " --aggregate " + agg_ + ClientFlags() + " -o " + mesh.string());
   ASSERT_EQ(r.code, 0) << r.output;
   const MeshMetrics m = Score(ReadPly(mesh));
@@ -354,12 +334,12 @@ TEST_F(AuthTest, DaemonsRefuseUnsafeEndpointsAndKeyFiles) {
     EXPECT_NE(p->Log().find(needle), std::string::npos) << p->Log();
   };
   exits({"--bind", agg_, "--store", store_.string()}, "--insecure");
-  const fs::path open_dir = tmp_->path() / "open";
+  const fs::path open_dir = tmp_.path() / "open";
   fs::create_directories(open_dir);
   fs::permissions(open_dir, fs::perms::owner_all | fs::perms::group_read | fs::perms::group_exec |
                                 fs::perms::others_read | fs::perms::others_exec);
   exits({"--bind", "ipc://" + (open_dir / "a.sock").string(), "--store", store_.string()}, "0700");
-  const fs::path lax = tmp_->path() / "lax.key";
+  const fs::path lax = tmp_.path() / "lax.key";
   fs::copy_file(keys_.Key("aggregate"), lax);
   fs::permissions(lax, fs::perms::owner_read | fs::perms::owner_write | fs::perms::group_read | fs::perms::others_read);
   {
@@ -378,7 +358,7 @@ TEST_F(AuthTest, DaemonsRefuseUnsafeEndpointsAndKeyFiles) {
     EXPECT_NE(p->Log().find("plain TCP"), std::string::npos) << p->Log();
   }
   {  // ipc:// in a 0700 folder, no keys
-    const fs::path priv = tmp_->path() / "private";
+    const fs::path priv = tmp_.path() / "private";
     fs::create_directories(priv);
     fs::permissions(priv, fs::perms::owner_all);
     const std::string ep = "ipc://" + (priv / "a.sock").string();
@@ -389,7 +369,7 @@ TEST_F(AuthTest, DaemonsRefuseUnsafeEndpointsAndKeyFiles) {
     EXPECT_EQ(p->Stop(), 0);
   }
   // lfrecon keygen: 0600 secret, a .pub that is an allow-list line; no overwrite without --force.
-  const fs::path kd = tmp_->path() / "gen";
+  const fs::path kd = tmp_.path() / "gen";
   auto r = RunShell(kBin + "lfrecon keygen w1 --role worker -o " + kd.string());
   ASSERT_EQ(r.code, 0) << r.output;
   EXPECT_EQ(fs::status(kd / "w1.key").permissions() & fs::perms::all, fs::perms::owner_read | fs::perms::owner_write);

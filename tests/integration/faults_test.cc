@@ -32,6 +32,7 @@
 #include "daemon_process.h"
 #include "io/dataset.h"
 #include "reference_dataset.h"
+#include "service_stack.h"
 
 namespace lfrecon::svc {
 namespace {
@@ -40,11 +41,11 @@ using std::chrono::milliseconds;
 
 using lfrecon::testing::BlackPng;
 using lfrecon::testing::DaemonProcess;
+using lfrecon::testing::kBin;
 using lfrecon::testing::MakeReference;
 using lfrecon::testing::ReferenceDataset;
 using lfrecon::testing::RemoveReference;
-
-const std::string kBin = lfrecon::testing::BinDir();
+using lfrecon::testing::ServiceStackTest;
 
 ReferenceDataset g_ref;  // one synthetic dataset for every test (lfrecon run is not needed)
 
@@ -71,49 +72,28 @@ bool ResetPeakRss(pid_t pid) {
   return static_cast<bool>(std::ofstream("/proc/" + std::to_string(pid) + "/clear_refs") << "5");
 }
 
-class FaultsTest : public ::testing::Test {
+class FaultsTest : public ServiceStackTest {
  protected:
   static void SetUpTestSuite() { MakeReference("faults", /*with_run=*/false, &g_ref); }
   static void TearDownTestSuite() { RemoveReference(g_ref); }
 
   void SetUp() override {
-    tmp_ = std::make_unique<lfrecon::testing::TempDir>();
-    store_ = tmp_->path() / "store";
+    ServiceStackTest::SetUp();
     fs::create_directories(store_);
-    agg_ = "ipc://" + (tmp_->path() / "agg.sock").string();
-    ing_ = "ipc://" + (tmp_->path() / "ing.sock").string();
     client_ = std::make_unique<RequestClient>(context_, agg_);
+    log_tail_chars_ = 4000;
   }
   void TearDown() override {
-    if (HasFailure())
-      for (const auto& p : procs_) std::printf("---- %s ----\n%s\n", p->log().c_str(), p->LogTail(4000).c_str());
-    procs_.clear();
+    ServiceStackTest::TearDown();
     client_.reset();
     if (mounted_) ::umount2(store_.c_str(), MNT_DETACH);
   }
 
-  DaemonProcess* Start(const std::string& exe, std::vector<std::string> args, long max_file_bytes = 0) {
-    args.insert(args.begin(), kBin + exe);
-    const fs::path log = tmp_->path() / (exe + "_" + std::to_string(procs_.size()) + ".log");
-    procs_.push_back(std::make_unique<DaemonProcess>(args, log, max_file_bytes));
-    return procs_.back().get();
-  }
+  // The base's, and client_ made anew for the new aggregator.
   DaemonProcess* StartAggregator(std::vector<std::string> extra = {}, long max_file_bytes = 0) {
-    std::vector<std::string> a = {"--bind", agg_, "--store", store_.string()};
-    a.insert(a.end(), extra.begin(), extra.end());
-    DaemonProcess* p = Start("lfrecon-aggregate", a, max_file_bytes);
+    DaemonProcess* p = ServiceStackTest::StartAggregator(std::move(extra), max_file_bytes);
     client_ = std::make_unique<RequestClient>(context_, agg_);
     return p;
-  }
-  DaemonProcess* StartIngest(std::vector<std::string> extra = {}) {
-    std::vector<std::string> a = {"--bind", ing_, "--aggregate", agg_, "--store", store_.string()};
-    a.insert(a.end(), extra.begin(), extra.end());
-    return Start("lfrecon-ingest", a);
-  }
-  DaemonProcess* StartWorker(const std::string& exe, std::vector<std::string> extra = {}) {
-    std::vector<std::string> a = {"--aggregate", agg_, "--store", store_.string()};
-    a.insert(a.end(), extra.begin(), extra.end());
-    return Start(exe, a);
   }
 
   std::optional<pb::Envelope> Ask(pb::Envelope req, int timeout_ms = 5000) {
@@ -141,7 +121,7 @@ class FaultsTest : public ::testing::Test {
   // A copy of the shared dataset whose frame `k` is replaced by file `name`
   // holding `bytes` (the COLMAP model renamed to it); the copy's folder.
   fs::path DatasetWithFrame(const std::string& tag, int k, const std::string& name, const std::string& bytes) {
-    const fs::path ds = tmp_->path() / tag;
+    const fs::path ds = tmp_.path() / tag;
     fs::copy(g_ref.dataset, ds, fs::copy_options::recursive);
     std::vector<fs::path> images;
     for (const auto& e : fs::directory_iterator(ds / "images")) images.push_back(e.path());
@@ -182,7 +162,7 @@ class FaultsTest : public ::testing::Test {
         60, &s))
         << pb::JobState_Name(s.state()) << ", " << s.frames_spooled() << " frames spooled: " << s.message();
   }
-  pb::JobStatus Status(const std::string& job) {
+  pb::JobStatus Status(const std::string& job) override {  // through client_
     pb::Envelope req = NewEnvelope(job);
     req.mutable_status();
     auto r = Ask(req);
@@ -235,12 +215,7 @@ class FaultsTest : public ::testing::Test {
     return job;
   }
 
-  zmq::context_t context_{1};
-  std::unique_ptr<lfrecon::testing::TempDir> tmp_;
-  fs::path store_;
-  std::string agg_, ing_;
   std::unique_ptr<RequestClient> client_;
-  std::vector<std::unique_ptr<DaemonProcess>> procs_;
   bool mounted_ = false;
 };
 
@@ -266,7 +241,7 @@ pb::Envelope Result(const std::string& job, pb::Stage stage, int view, const std
 TEST_F(FaultsTest, IngestReadsOnlyUnderItsDataRoots) {
   StartAggregator();
   const fs::path root = g_ref.dataset.parent_path();
-  const fs::path elsewhere = tmp_->path() / "elsewhere";
+  const fs::path elsewhere = tmp_.path() / "elsewhere";
   fs::create_directories(elsewhere);
   DaemonProcess* ing = StartIngest({"--data-root", elsewhere.string()});
   auto submit = [&](const std::string& dataset) {
@@ -302,7 +277,7 @@ TEST_F(FaultsTest, IngestErrorRepliesDoNotEchoTheFile) {
   StartAggregator();
   StartIngest();
   const std::string secret = "sk_live_SECRET_4eC39HqLyjWDarjtT1zdp7dc";
-  const fs::path ds = tmp_->path() / "leaky";
+  const fs::path ds = tmp_.path() / "leaky";
   fs::copy(g_ref.dataset, ds, fs::copy_options::recursive);
   const std::string good = ReadFileBytes(ds / "transforms.json");
   const auto at = good.find("\"fl_x\":");
@@ -319,12 +294,12 @@ TEST_F(FaultsTest, IngestErrorRepliesDoNotEchoTheFile) {
     EXPECT_EQ(r.output.find("SECRET"), std::string::npos) << r.output;
   };
   // The COLMAP model comes first: without it, transforms.json is read.
-  fs::rename(ds / "sparse", tmp_->path() / "sparse");
+  fs::rename(ds / "sparse", tmp_.path() / "sparse");
   std::ofstream(ds / "transforms.json", std::ios::binary) << bad_value;
   expect_refused("transforms.json", "fl_x");
   std::ofstream(ds / "transforms.json", std::ios::binary) << bad_json;
   expect_refused("transforms.json", "not valid JSON");
-  fs::rename(tmp_->path() / "sparse", ds / "sparse");
+  fs::rename(tmp_.path() / "sparse", ds / "sparse");
   std::ofstream(ds / "sparse" / "cameras.txt") << "1 PINHOLE 96 54 " << secret << " 92 48 27\n";
   expect_refused("cameras.txt", "line 1");
   std::ofstream(ds / "sparse" / "cameras.txt") << "1 " << secret << "\n";
@@ -338,7 +313,7 @@ TEST_F(FaultsTest, IngestErrorRepliesDoNotEchoTheFile) {
 TEST_F(FaultsTest, IngestRefusesDeeplyNestedJsonAndKeepsServing) {
   StartAggregator();
   DaemonProcess* ing = StartIngest();
-  const fs::path ds = tmp_->path() / "deep";
+  const fs::path ds = tmp_.path() / "deep";
   fs::copy(g_ref.dataset, ds, fs::copy_options::recursive);
   fs::remove_all(ds / "sparse");  // transforms.json is read only without a COLMAP model
   {
@@ -397,7 +372,7 @@ TEST_F(FaultsTest, ResultMustMatchItsLease) {
 // the first's name cannot answer (or fail) the first's lease; the lease stays
 // the first's, whose result is taken. (Matched by name, both were accepted.)
 TEST_F(FaultsTest, ResultForAnotherWorkersLeaseIsRefusedByKey) {
-  const fs::path kd = tmp_->path() / "keys";
+  const fs::path kd = tmp_.path() / "keys";
   fs::create_directories(kd);
   const std::pair<const char*, Role> keys[] = {{"aggregate", Role::kServer}, {"ingest", Role::kIngest},
                                                 {"client", Role::kClient},   {"w1", Role::kWorker},
@@ -410,7 +385,7 @@ TEST_F(FaultsTest, ResultForAnotherWorkersLeaseIsRefusedByKey) {
       if (role != Role::kServer) list << ReadFileBytes(kd / (std::string(name) + ".pub"));
     }
   }
-  agg_ = "tcp://127.0.0.1:" + std::to_string(lfrecon::testing::FreePort());
+  agg_ = lfrecon::testing::TcpEndpoint();
   Start("lfrecon-aggregate", {"--bind", agg_, "--store", store_.string(), "--key", (kd / "aggregate.key").string(),
                               "--allow", allow.string()});
   auto as = [&](const std::string& name) {
@@ -592,7 +567,7 @@ TEST_F(FaultsTest, ResultOverTheSizeLimitFailsTheJob) {
 TEST_F(FaultsTest, SecondAggregatorOnTheStoreRefusesToStart) {
   DaemonProcess* first = StartAggregator();
   ASSERT_TRUE(Ping(agg_));
-  const std::string other = "ipc://" + (tmp_->path() / "agg2.sock").string();
+  const std::string other = "ipc://" + (tmp_.path() / "agg2.sock").string();
   DaemonProcess* second = Start("lfrecon-aggregate", {"--bind", other, "--store", store_.string()});
   EXPECT_EQ(second->WaitExit(std::chrono::seconds(10)), 1);
   EXPECT_NE(second->Log().find("another lfrecon-aggregate serves the job store"), std::string::npos)
@@ -613,7 +588,7 @@ TEST_F(FaultsTest, SecondIngestOnTheStoreRefusesToStart) {
   StartAggregator();
   DaemonProcess* first = StartIngest();
   ASSERT_TRUE(Ping(ing_));
-  const std::string other = "ipc://" + (tmp_->path() / "ing2.sock").string();
+  const std::string other = "ipc://" + (tmp_.path() / "ing2.sock").string();
   DaemonProcess* second =
       Start("lfrecon-ingest", {"--bind", other, "--aggregate", agg_, "--store", store_.string()});
   EXPECT_EQ(second->WaitExit(std::chrono::seconds(10)), 1);
@@ -740,7 +715,7 @@ TEST_F(FaultsTest, IngestFailureReasonIsSanitisedAndBounded) {
     ::unsetenv("LFRECON_TEST_DATASET");
     return r;
   };
-  const fs::path bad_dir = tmp_->path() / ("ds\n" + forged + "\x1b[31m");
+  const fs::path bad_dir = tmp_.path() / ("ds\n" + forged + "\x1b[31m");
   fs::copy(g_ref.dataset, bad_dir, fs::copy_options::recursive);
   const auto refused = submit(bad_dir);
   EXPECT_EQ(refused.code, 1) << refused.output;
@@ -748,7 +723,7 @@ TEST_F(FaultsTest, IngestFailureReasonIsSanitisedAndBounded) {
 
   // A dataset 3 folders of 240 characters deep, its last image renamed (in
   // transforms.json too) to a name of 251 bytes with a newline and an escape.
-  fs::path ds = tmp_->path() / "ds";
+  fs::path ds = tmp_.path() / "ds";
   for (int k = 0; k < 3; ++k) ds /= std::string(240, 'D');
   fs::create_directories(ds.parent_path());
   fs::copy(g_ref.dataset, ds, fs::copy_options::recursive);
@@ -870,8 +845,8 @@ TEST_F(FaultsTest, BoundsRefuseRequestsBeyondThem) {
   EXPECT_NE(fourth.second.find("--max-jobs 2"), std::string::npos) << fourth.second;
   EXPECT_TRUE(ing->Running());
   // A per-job quota smaller than the job: refused at submit, naming the quota.
-  const std::string small = "ipc://" + (tmp_->path() / "ing_small.sock").string();
-  const fs::path store2 = tmp_->path() / "store2";
+  const std::string small = "ipc://" + (tmp_.path() / "ing_small.sock").string();
+  const fs::path store2 = tmp_.path() / "store2";
   Start("lfrecon-ingest", {"--bind", small, "--aggregate", agg_, "--store", store2.string(), "--job-quota-gb", "0.005"});
   const auto quota = submit(small);  // 90 frames of 96x54 at ingest's 21 bytes a pixel (compact frames): ~9.8 MB
   EXPECT_EQ(quota.first, 1) << quota.second;

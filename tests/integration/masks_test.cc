@@ -23,25 +23,19 @@
 #include "common/messaging.h"
 #include "common/stream_client.h"
 #include "common/test_util.h"
-#include "integration/daemon_process.h"
 #include "io/dataset.h"
 #include "io/ply.h"
+#include "service_stack.h"
 
 namespace lfrecon::svc {
 namespace {
 namespace fs = std::filesystem;
-using lfrecon::testing::DaemonProcess;
-using lfrecon::testing::RunShell;
+using lfrecon::testing::kBin;
+using lfrecon::testing::ServiceStackTest;
+using lfrecon::testing::Sh;
 using std::chrono::milliseconds;
 
-const std::string kBin = std::string(LFRECON_BINARY_DIR) + "/bin/";
 constexpr double kVoxelMm = 6.0;
-
-std::string Sh(const std::string& cmd) {
-  const auto r = RunShell(cmd);
-  EXPECT_EQ(r.code, 0) << cmd << "\n" << r.output;
-  return r.output;
-}
 
 std::string FirstLine(const std::string& s) { return s.substr(0, s.find('\n')); }
 
@@ -55,39 +49,8 @@ double LargestDifference(const TriangleMesh& a, const TriangleMesh& b) {
   return d;
 }
 
-class MasksTest : public ::testing::Test {
+class MasksTest : public ServiceStackTest {
  protected:
-  void SetUp() override {
-    store_ = tmp_.path() / "store";
-    agg_ = "ipc://" + (tmp_.path() / "agg.sock").string();
-    ing_ = "ipc://" + (tmp_.path() / "ing.sock").string();
-  }
-  void TearDown() override {
-    if (HasFailure())
-      for (const auto& p : procs_) std::printf("---- %s ----\n%s\n", p->log().c_str(), p->LogTail(3000).c_str());
-    procs_.clear();
-  }
-  DaemonProcess* Start(const std::string& exe, std::vector<std::string> args) {
-    args.insert(args.begin(), kBin + exe);
-    procs_.push_back(std::make_unique<DaemonProcess>(args, tmp_.path() / (exe + std::to_string(procs_.size()) + ".log")));
-    return procs_.back().get();
-  }
-  void StartStack(bool workers) {
-    Start("lfrecon-aggregate", {"--bind", agg_, "--store", store_.string()});
-    Start("lfrecon-ingest", {"--bind", ing_, "--aggregate", agg_, "--store", store_.string()});
-    if (workers) {
-      Start("lfrecon-depth", {"--aggregate", agg_, "--store", store_.string()});
-      Start("lfrecon-propagate", {"--aggregate", agg_, "--store", store_.string()});
-    }
-  }
-  pb::JobStatus Status(const std::string& job) {
-    RequestClient c(context_, agg_);
-    pb::Envelope req = NewEnvelope(job);
-    req.mutable_status();
-    auto r = c.Request(req, milliseconds(5000));
-    if (!r || !r->has_job_status()) return pb::JobStatus();
-    return r->job_status();
-  }
   // A generated arc with masks (JPEG frames, PNG masks in masks/), without
   // scene.json: V is the masks' visual hull, in lfrecon run and in the service.
   fs::path Synth(int frames, int width, int height, double degrees) {
@@ -98,12 +61,6 @@ class MasksTest : public ::testing::Test {
     fs::remove(data / "scene.json");
     return data;
   }
-
-  lfrecon::testing::TempDir tmp_;
-  fs::path store_;
-  std::string agg_, ing_;
-  zmq::context_t context_{1};
-  std::vector<std::unique_ptr<DaemonProcess>> procs_;
 };
 
 // `lfrecon submit` and `lfrecon stream` of a masked dataset: every frame in the
@@ -134,7 +91,7 @@ TEST_F(MasksTest, SubmitAndStreamOfMaskedDatasetEqualRun) {
   // The masks' free space changes the mesh: a service that ignored the masks would not match it.
   EXPECT_GT(LargestDifference(run_mesh, plain_mesh), 0.0);
 
-  StartStack(true);
+  StartStack(1);
   JobStore js(store_);
   auto check_job = [&](const std::string& how, const std::string& job) {
     const pb::JobStatus s = Status(job);
@@ -241,7 +198,7 @@ TEST_F(MasksTest, MalformedMaskIsRefusedNamingTheFrame) {
   std::vector<pb::Frame> frames;
   for (int k = 0; k < ds.NumViews(); ++k) frames.push_back(enc.Encode(k, false));
   ASSERT_FALSE(frames[2].mask().empty());
-  StartStack(false);
+  StartStack(0);
   StreamClient client(context_, ing_);
   pb::StreamOpen open;
   for (int k = 0; k < 3; ++k) open.mutable_spec()->add_bbox(ds.bbox().min(k));
@@ -299,7 +256,7 @@ TEST_F(MasksTest, ManifestRecordsWhetherFramesCarryMasks) {
   d.dataset_dir = data;
   const Dataset ds = Dataset::Open(d);
   StoreFrameEncoder enc(ds);
-  StartStack(false);
+  StartStack(0);
   JobStore js(store_);
   const std::string submitted =
       FirstLine(Sh(kBin + "lfrecon -q submit --ingest " + ing_ + " --aggregate " + agg_ + " --dataset " + data.string()));

@@ -46,10 +46,10 @@ namespace {
 namespace fs = std::filesystem;
 using lfrecon::testing::CommandResult;
 using lfrecon::testing::DaemonProcess;
+using lfrecon::testing::kBin;
 using lfrecon::testing::ReferenceDataset;
 using lfrecon::testing::RunShell;
 
-const std::string kBin = lfrecon::testing::BinDir();
 constexpr double kVoxelMm = lfrecon::testing::kReferenceVoxelMm;
 const std::string kPrefix = "lfrecon-t";  // namespace names: lfrecon-t<pid>-<role>
 

@@ -19,6 +19,7 @@ namespace lfrecon::testing {
 
 // The built executables (lfrecon, the daemons).
 inline std::string BinDir() { return std::string(LFRECON_BINARY_DIR) + "/bin/"; }
+inline const std::string kBin = BinDir();
 
 constexpr double kReferenceVoxelMm = 8.0;  // the voxel of the reference run and of the tests' jobs
 

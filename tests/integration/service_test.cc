@@ -23,6 +23,7 @@
 #include "io/dataset.h"
 #include "io/ply.h"
 #include "reference_dataset.h"
+#include "service_stack.h"
 
 namespace lfrecon::svc {
 namespace {
@@ -30,12 +31,13 @@ namespace fs = std::filesystem;
 using std::chrono::milliseconds;
 
 using lfrecon::testing::DaemonProcess;
+using lfrecon::testing::kBin;
 using lfrecon::testing::MakeReference;
 using lfrecon::testing::ReferenceDataset;
 using lfrecon::testing::RemoveReference;
 using lfrecon::testing::ScoreAgainstReference;
+using lfrecon::testing::ServiceStackTest;
 
-const std::string kBin = lfrecon::testing::BinDir();
 constexpr double kVoxelMm = lfrecon::testing::kReferenceVoxelMm;
 
 // Runs a command, returns its stdout; fails the test on a non-zero exit.
@@ -55,7 +57,7 @@ ReferenceDataset* g_ref = nullptr;
 
 MeshMetrics Score(const TriangleMesh& mesh) { return ScoreAgainstReference(mesh, *g_ref); }
 
-class ServiceTest : public ::testing::Test {
+class ServiceTest : public ServiceStackTest {
  protected:
   static void SetUpTestSuite() {
     g_ref = new ReferenceDataset;
@@ -72,48 +74,12 @@ class ServiceTest : public ::testing::Test {
   }
 
   void SetUp() override {
-    tmp_ = std::make_unique<lfrecon::testing::TempDir>();
-    store_ = tmp_->path() / "store";
-    agg_ = "ipc://" + (tmp_->path() / "agg.sock").string();
-    ing_ = "ipc://" + (tmp_->path() / "ing.sock").string();
+    ServiceStackTest::SetUp();
     client_ = std::make_unique<RequestClient>(context_, agg_);
   }
   void TearDown() override {
-    if (HasFailure())
-      for (const auto& p : procs_) std::printf("---- %s ----\n%s\n", p->log().c_str(), p->LogTail(3000).c_str());
-    procs_.clear();
+    ServiceStackTest::TearDown();
     client_.reset();
-  }
-
-  DaemonProcess* Start(const std::string& exe, std::vector<std::string> args) {
-    args.insert(args.begin(), kBin + exe);
-    const fs::path log = tmp_->path() / (exe + "_" + std::to_string(procs_.size()) + ".log");
-    procs_.push_back(std::make_unique<DaemonProcess>(args, log));
-    return procs_.back().get();
-  }
-  DaemonProcess* StartAggregator(std::vector<std::string> extra = {}) {
-    std::vector<std::string> a = {"--bind", agg_, "--store", store_.string()};
-    a.insert(a.end(), extra.begin(), extra.end());
-    return Start("lfrecon-aggregate", a);
-  }
-  DaemonProcess* StartIngest(std::vector<std::string> extra = {}) {
-    std::vector<std::string> a = {"--bind", ing_, "--aggregate", agg_, "--store", store_.string()};
-    a.insert(a.end(), extra.begin(), extra.end());
-    return Start("lfrecon-ingest", a);
-  }
-  DaemonProcess* StartWorker(const std::string& exe, std::vector<std::string> extra = {}) {
-    std::vector<std::string> a = {"--aggregate", agg_, "--store", store_.string()};
-    a.insert(a.end(), extra.begin(), extra.end());
-    return Start(exe, a);
-  }
-  // The whole stack with `workers` processes per stage.
-  void StartStack(int workers, std::vector<std::string> agg_extra = {}) {
-    StartAggregator(agg_extra);
-    StartIngest();
-    for (int i = 0; i < workers; ++i) {
-      StartWorker("lfrecon-depth");
-      StartWorker("lfrecon-propagate");
-    }
   }
 
   std::string Submit() {
@@ -129,7 +95,7 @@ class ServiceTest : public ::testing::Test {
     EXPECT_TRUE(r.has_value()) << "no reply to " << BodyName(req);
     return r ? *r : ErrorEnvelope(pb::ERROR_UNKNOWN, "no reply");
   }
-  pb::JobStatus Status(const std::string& job) {
+  pb::JobStatus Status(const std::string& job) override {  // through client_, a missing reply fails
     pb::Envelope req = NewEnvelope(job);
     req.mutable_status();
     const pb::Envelope r = Ask(req);
@@ -172,7 +138,7 @@ class ServiceTest : public ::testing::Test {
   // The final mesh through the CLI, scored against lfrecon run's: the fused one
   // (mesh_raw.ply), or with `refine` the refined one (mesh.ply).
   void ExpectSameAsEmbedded(const std::string& job, bool refine = false) {
-    const fs::path out = tmp_->path() / (refine ? "final_refined.ply" : "final.ply");
+    const fs::path out = tmp_.path() / (refine ? "final_refined.ply" : "final.ply");
     const auto t0 = std::chrono::steady_clock::now();
     RunCommand(kBin + "lfrecon -q export " + job + (refine ? " --refine" : "") + " --aggregate " + agg_ + " -o " +
                out.string());
@@ -190,12 +156,7 @@ class ServiceTest : public ::testing::Test {
     EXPECT_NEAR(m.scores[1].fscore, f4, 1e-3);
   }
 
-  zmq::context_t context_{1};
-  std::unique_ptr<lfrecon::testing::TempDir> tmp_;
-  fs::path store_;
-  std::string agg_, ing_;
   std::unique_ptr<RequestClient> client_;
-  std::vector<std::unique_ptr<DaemonProcess>> procs_;
 };
 
 TEST_F(ServiceTest, SubmittedJobOnSeparateProcessesEqualsEmbeddedRun) {
@@ -211,10 +172,10 @@ TEST_F(ServiceTest, SubmittedJobOnSeparateProcessesEqualsEmbeddedRun) {
   // export --refine: carving + screened Poisson of the job's grid, rebuilt from
   // its checkpoint, equals lfrecon run's mesh.ply; kept, so the next one is the same file.
   ExpectSameAsEmbedded(job, true);
-  const pb::ExportReply again = Export(job, tmp_->path() / "again.ply", true);
+  const pb::ExportReply again = Export(job, tmp_.path() / "again.ply", true);
   EXPECT_TRUE(again.complete());
   EXPECT_EQ(again.views_fused(), static_cast<unsigned>(g_ref->views));
-  EXPECT_EQ(again.ply(), ReadFileBytes(tmp_->path() / "final_refined.ply"));
+  EXPECT_EQ(again.ply(), ReadFileBytes(tmp_.path() / "final_refined.ply"));
   EXPECT_TRUE(fs::exists(store_ / job / "mesh_refined.ply"));
   // Cancelling a finished job leaves it DONE.
   pb::Envelope cancel = NewEnvelope(job);
@@ -264,8 +225,8 @@ TEST_F(ServiceTest, FramesOutOfOrderAndDuplicatedAndExportMidStream) {
   };
   spool(0, n / 2);
   const pb::JobStatus mid1 = WaitUntil(job, [](const pb::JobStatus& s) { return s.views_fused() >= 20; });
-  const pb::ExportReply e1 = Export(job, tmp_->path() / "mid1.ply");
-  const TriangleMesh m1 = ReadPly(tmp_->path() / "mid1.ply");
+  const pb::ExportReply e1 = Export(job, tmp_.path() / "mid1.ply");
+  const TriangleMesh m1 = ReadPly(tmp_.path() / "mid1.ply");
   EXPECT_FALSE(e1.complete());
   EXPECT_GE(e1.views_fused(), mid1.views_fused());
   EXPECT_LT(e1.views_fused(), static_cast<unsigned>(n));
@@ -275,8 +236,8 @@ TEST_F(ServiceTest, FramesOutOfOrderAndDuplicatedAndExportMidStream) {
     for (int k = 0; k < 3; ++k) ASSERT_LT(static_cast<std::size_t>(t[k]), m1.vertices.size());
   // Refined mid-stream: of the views fused when asked (the job keeps running meanwhile).
   const auto t_refine = std::chrono::steady_clock::now();
-  const pb::ExportReply r1 = Export(job, tmp_->path() / "mid1_refined.ply", true);
-  const TriangleMesh mr1 = ReadPly(tmp_->path() / "mid1_refined.ply");
+  const pb::ExportReply r1 = Export(job, tmp_.path() / "mid1_refined.ply", true);
+  const TriangleMesh mr1 = ReadPly(tmp_.path() / "mid1_refined.ply");
   std::printf("mid-stream export --refine: %u views -> %zu triangles (%.2f s)\n", r1.views_fused(),
               mr1.triangles.size(),
               std::chrono::duration<double>(std::chrono::steady_clock::now() - t_refine).count());
@@ -288,8 +249,8 @@ TEST_F(ServiceTest, FramesOutOfOrderAndDuplicatedAndExportMidStream) {
     for (int k = 0; k < 3; ++k) ASSERT_LT(static_cast<std::size_t>(t[k]), mr1.vertices.size());
   spool(n / 2, n);
   WaitUntil(job, [&](const pb::JobStatus& s) { return s.views_fused() >= e1.views_fused() + 30; });
-  const pb::ExportReply e2 = Export(job, tmp_->path() / "mid2.ply");
-  const TriangleMesh m2 = ReadPly(tmp_->path() / "mid2.ply");
+  const pb::ExportReply e2 = Export(job, tmp_.path() / "mid2.ply");
+  const TriangleMesh m2 = ReadPly(tmp_.path() / "mid2.ply");
   std::printf("mid-stream exports: %u views -> %zu triangles, %u views -> %zu triangles\n", e1.views_fused(),
               m1.triangles.size(), e2.views_fused(), m2.triangles.size());
   EXPECT_GT(e2.views_fused(), e1.views_fused());
@@ -429,12 +390,12 @@ TEST_F(ServiceTest, StatusAnsweredWhileFusingAndStopMidQueue) {
   EXPECT_LT(ms.back(), 500.0);
   // Export mid-stream: the views fused when it got the grid.
   const pb::JobStatus s0 = Status(job);
-  const pb::ExportReply e = Export(job, tmp_->path() / "mid.ply");
+  const pb::ExportReply e = Export(job, tmp_.path() / "mid.ply");
   const pb::JobStatus s1 = Status(job);
   EXPECT_FALSE(e.complete());
   EXPECT_GE(e.views_fused(), s0.views_fused());
   EXPECT_LE(e.views_fused(), s1.views_fused());
-  EXPECT_EQ(ReadPly(tmp_->path() / "mid.ply").triangles.size(), e.triangles());
+  EXPECT_EQ(ReadPly(tmp_.path() / "mid.ply").triangles.size(), e.triangles());
   // SIGTERM mid-queue: a clean exit after the view under way.
   const auto t_stop = std::chrono::steady_clock::now();
   EXPECT_EQ(agg->Stop(), 0);
@@ -534,7 +495,7 @@ TEST_F(ServiceTest, BadMessagesGetErrorRepliesAndDaemonsKeepServing) {
   {
     RequestClient ingest(context_, ing_);
     pb::Envelope sub = NewEnvelope();
-    sub.mutable_submit()->mutable_spec()->set_dataset_dir((tmp_->path() / "missing").string());
+    sub.mutable_submit()->mutable_spec()->set_dataset_dir((tmp_.path() / "missing").string());
     auto r = ingest.Request(sub, milliseconds(5000));
     ASSERT_TRUE(r && r->has_error());
     EXPECT_EQ(r->error().code(), pb::ERROR_INPUT) << r->error().message();

@@ -17,26 +17,22 @@
 #include "common/messaging.h"
 #include "common/stream_client.h"
 #include "common/test_util.h"
-#include "integration/daemon_process.h"
 #include "io/dataset.h"
 #include "io/depth_map_io.h"
 #include "io/ply.h"
+#include "service_stack.h"
 
 namespace lfrecon::svc {
 namespace {
 namespace fs = std::filesystem;
 using lfrecon::testing::DaemonProcess;
+using lfrecon::testing::kBin;
 using lfrecon::testing::RunShell;
+using lfrecon::testing::ServiceStackTest;
+using lfrecon::testing::Sh;
 using std::chrono::milliseconds;
 
-const std::string kBin = std::string(LFRECON_BINARY_DIR) + "/bin/";
 constexpr double kVoxelMm = 6.0;
-
-std::string Sh(const std::string& cmd) {
-  const auto r = RunShell(cmd);
-  EXPECT_EQ(r.code, 0) << cmd << "\n" << r.output;
-  return r.output;
-}
 
 std::string LastLine(std::string s) {
   s.erase(s.find_last_not_of('\n') + 1);
@@ -44,41 +40,8 @@ std::string LastLine(std::string s) {
   return nl == std::string::npos ? s : s.substr(nl + 1);
 }
 
-class StreamTest : public ::testing::Test {
+class StreamTest : public ServiceStackTest {
  protected:
-  void SetUp() override {
-    store_ = tmp_.path() / "store";
-    agg_ = "ipc://" + (tmp_.path() / "agg.sock").string();
-    ing_ = "ipc://" + (tmp_.path() / "ing.sock").string();
-  }
-  void TearDown() override {
-    if (HasFailure())
-      for (const auto& p : procs_) std::printf("---- %s ----\n%s\n", p->log().c_str(), p->LogTail(3000).c_str());
-    procs_.clear();
-  }
-  DaemonProcess* Start(const std::string& exe, std::vector<std::string> args) {
-    args.insert(args.begin(), kBin + exe);
-    procs_.push_back(std::make_unique<DaemonProcess>(args, tmp_.path() / (exe + std::to_string(procs_.size()) + ".log")));
-    return procs_.back().get();
-  }
-  void StartStack(std::vector<std::string> ingest_args, bool workers) {
-    Start("lfrecon-aggregate", {"--bind", agg_, "--store", store_.string()});
-    std::vector<std::string> a = {"--bind", ing_, "--aggregate", agg_, "--store", store_.string()};
-    a.insert(a.end(), ingest_args.begin(), ingest_args.end());
-    Start("lfrecon-ingest", a);
-    if (workers) {
-      Start("lfrecon-depth", {"--aggregate", agg_, "--store", store_.string()});
-      Start("lfrecon-propagate", {"--aggregate", agg_, "--store", store_.string()});
-    }
-  }
-  pb::JobStatus Status(const std::string& job) {
-    RequestClient c(context_, agg_);
-    pb::Envelope req = NewEnvelope(job);
-    req.mutable_status();
-    auto r = c.Request(req, milliseconds(5000));
-    if (!r || !r->has_job_status()) return pb::JobStatus();
-    return r->job_status();
-  }
   // A small generated dataset: `frames` frames 0.3° apart.
   // JPEG frames (the store keeps their bytes; the daemons decode the bytes lfrecon run decodes).
   fs::path Synth(int frames, int width, int height) {
@@ -106,12 +69,6 @@ class StreamTest : public ::testing::Test {
     open.set_credits(static_cast<std::uint32_t>(credits));
     return open;
   }
-
-  lfrecon::testing::TempDir tmp_;
-  fs::path store_;
-  std::string agg_, ing_;
-  zmq::context_t context_{1};
-  std::vector<std::unique_ptr<DaemonProcess>> procs_;
 };
 
 // `lfrecon stream` of a 0.3°-spaced arc: the job's plan (computed at the end
@@ -126,7 +83,7 @@ TEST_F(StreamTest, StreamOfDenseArcEqualsRun) {
   const nlohmann::json report = nlohmann::json::parse(ReadFileBytes(run_dir / "report.json"));
   const int selected = report["views"]["processed"];
   EXPECT_EQ(selected, kFrames / 4);  // 0.3° apart, selected >= 1° apart: every fourth view
-  StartStack({}, true);
+  StartStack(1);
   const fs::path stats = tmp_.path() / "stats.json", follow = tmp_.path() / "follow.ply";
   const std::string out = Sh(kBin + "lfrecon -q stream --ingest " + ing_ + " --aggregate " + agg_ + " --dataset " +
                              data.string() + " --voxel-mm " + std::to_string(kVoxelMm) + " --credits 4 --stats " +
@@ -209,7 +166,7 @@ TEST_F(StreamTest, GrowingPlanFusesWhileStreamingAndEqualsRun) {
       d = std::max(d, static_cast<double>((m.vertices[k] - run_mesh.vertices[k]).norm()));
     return d;
   };
-  StartStack({}, true);
+  StartStack(1);
   JobStore js(store_);
   auto export_vertices = [&](const std::string& job) -> long {
     RequestClient c(context_, agg_);
@@ -325,7 +282,7 @@ TEST_F(StreamTest, FastClientIsBoundedByCredits) {
   const fs::path data = Synth(16, 64, 36);
   BoundingBox v;
   const std::vector<pb::Frame> frames = Frames(data, &v);
-  StartStack({"--frame-delay-ms", "40"}, false);
+  StartStack(0, {"--frame-delay-ms", "40"});
   StreamClient client(context_, ing_);
   const pb::StreamOpened opened = client.Open(Open(v, 3), milliseconds(10000));
   EXPECT_EQ(opened.credits(), 3u);
@@ -369,7 +326,7 @@ TEST_F(StreamTest, OutOfOrderAcceptedRepeatIgnoredGapFails) {
   const fs::path data = Synth(6, 64, 36);
   BoundingBox v;
   const std::vector<pb::Frame> frames = Frames(data, &v);
-  StartStack({}, false);
+  StartStack(0);
   StreamClient client(context_, ing_);
   client.Open(Open(v, 4), milliseconds(10000));
   pb::Frame changed = frames[1];
@@ -424,7 +381,7 @@ TEST_F(StreamTest, IntrinsicsOncePerJobAndRawFrames) {
   const fs::path data = Synth(4, 64, 36);
   BoundingBox v;
   const std::vector<pb::Frame> frames = Frames(data, &v);
-  StartStack({}, false);
+  StartStack(0);
   StreamClient client(context_, ing_);
   pb::StreamOpen open = Open(v, 2);
   pb::Camera* intr = open.mutable_intrinsics();
@@ -484,7 +441,7 @@ TEST_F(StreamTest, ClientGoneMidStreamFailsTheJob) {
   const fs::path data = Synth(6, 64, 36);
   BoundingBox v;
   const std::vector<pb::Frame> frames = Frames(data, &v);
-  StartStack({"--stream-timeout-s", "1"}, false);
+  StartStack(0, {"--stream-timeout-s", "1"});
   std::string job;
   {
     StreamClient client(context_, ing_);
