@@ -28,6 +28,7 @@ void GradientDepthOptions::Check() const {
   LFRECON_CHECK_OPTION(max_view_angle_deg > 0 && max_view_angle_deg < 90);
   LFRECON_CHECK_OPTION(refine_reference_points >= 1);
   LFRECON_CHECK_OPTION(shift_iterations >= 0);
+  LFRECON_CHECK_OPTION(shift_tolerance_px >= 0);
   LFRECON_CHECK_OPTION(outlier_pixels > 0);
   LFRECON_CHECK_OPTION(min_depth >= 0);
   LFRECON_CHECK_OPTION(max_depth <= 0 || max_depth > min_depth);
@@ -428,7 +429,7 @@ class PixelSolver {
       best = m;
       moved = true;
       s += m.shift;
-      if (std::abs(m.shift) < 0.01) break;
+      if (std::abs(m.shift) < o_.shift_tolerance_px) break;
     }
     if (moved) {
       // The last accepted measurement's match is at s (checked inside the image).

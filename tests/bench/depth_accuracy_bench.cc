@@ -60,6 +60,8 @@ int main(int argc, char** argv) {
     else if (!std::strcmp(argv[a], "--voxel") && a + 1 < argc) sopt.filter.voxel_size = std::atof(argv[++a]);
     else if (!std::strcmp(argv[a], "--level-step") && a + 1 < argc) sopt.gradient.level_min_step_deg = std::atof(argv[++a]);
     else if (!std::strcmp(argv[a], "--level-ratio") && a + 1 < argc) sopt.gradient.level_angle_ratio = std::atof(argv[++a]);
+    else if (!std::strcmp(argv[a], "--shift-tolerance") && a + 1 < argc)
+      sopt.gradient.shift_tolerance_px = std::atof(argv[++a]);
     else if (!std::strcmp(argv[a], "--reference-points") && a + 1 < argc)
       sopt.gradient.refine_reference_points = std::atoi(argv[++a]);
     else {
