@@ -207,10 +207,17 @@ PoseRefinementResult RefinePoses(FrameSource& frames, const std::vector<PinholeV
   // 1. Tracks.
   Timer timer;
   std::vector<Track> finished, active;
-  std::deque<std::pair<int, cv::Mat>> recent;  // grey frames that anchor live tracks
+  // Each frame's LK pyramid with its Scharr derivatives is built once and
+  // serves every call it takes part in (forward, backward, and as the anchor
+  // of later re-anchoring): calcOpticalFlowPyrLK given plain images rebuilds
+  // both pyramids and the first image's derivatives on every call, ten or
+  // more times per frame here. Same arguments and borders as it uses, so the
+  // tracks are bit-identical.
+  using Pyramid = std::vector<cv::Mat>;
+  std::deque<std::pair<int, Pyramid>> recent;  // pyramids of the frames that anchor live tracks
   const cv::Size win(options.lk_window_px, options.lk_window_px);
   const cv::TermCriteria crit(cv::TermCriteria::COUNT | cv::TermCriteria::EPS, 30, 0.005);
-  cv::Mat prev;
+  Pyramid prev;
   Frame frame;
   int k = 0;
   Progress progress("pose refinement: tracking", n);
@@ -222,13 +229,15 @@ PoseRefinementResult RefinePoses(FrameSource& frames, const std::vector<PinholeV
       throw InputError(frame.name, "pose refinement reads frames in order; expected frame " + std::to_string(k));
     if (k >= n) throw InputError(frame.name, "more frames than cameras");
     const cv::Mat grey = Grey8(frame.image);
+    Pyramid pyramid;
+    cv::buildOpticalFlowPyramid(grey, pyramid, win, options.lk_levels, true);
     if (!active.empty()) {
       std::vector<cv::Point2f> p0, p1, pb;
       for (const Track& t : active) p0.push_back(t.last);
       std::vector<uchar> s1, s2;
       std::vector<float> err;
-      cv::calcOpticalFlowPyrLK(prev, grey, p0, p1, s1, err, win, options.lk_levels, crit);
-      cv::calcOpticalFlowPyrLK(grey, prev, p1, pb, s2, err, win, options.lk_levels, crit);
+      cv::calcOpticalFlowPyrLK(prev, pyramid, p0, p1, s1, err, win, options.lk_levels, crit);
+      cv::calcOpticalFlowPyrLK(pyramid, prev, p1, pb, s2, err, win, options.lk_levels, crit);
       // Re-anchor: each survivor is tracked again from its anchor frame's
       // patch, starting from the chained position, so steps do not add up.
       std::map<int, std::vector<int>> by_anchor;
@@ -249,7 +258,7 @@ PoseRefinementResult RefinePoses(FrameSource& frames, const std::vector<PinholeV
           a1.push_back(p1[static_cast<std::size_t>(i)]);
         }
         std::vector<uchar> s3;
-        cv::calcOpticalFlowPyrLK(it->second, grey, a0, a1, s3, err, win, 0, crit, cv::OPTFLOW_USE_INITIAL_FLOW);
+        cv::calcOpticalFlowPyrLK(it->second, pyramid, a0, a1, s3, err, win, 0, crit, cv::OPTFLOW_USE_INITIAL_FLOW);
         for (std::size_t m = 0; m < ids.size(); ++m) {
           const std::size_t i = static_cast<std::size_t>(ids[m]);
           if (!s3[m] || cv::norm(a1[m] - p1[i]) > options.max_anchor_correction_px) continue;
@@ -293,11 +302,11 @@ PoseRefinementResult RefinePoses(FrameSource& frames, const std::vector<PinholeV
         }
       }
     }
-    recent.emplace_back(k, grey);
+    recent.emplace_back(k, pyramid);
     int oldest = k;
     for (const Track& t : active) oldest = std::min(oldest, t.anchor);
     while (!recent.empty() && recent.front().first < oldest) recent.pop_front();
-    prev = grey;
+    prev = std::move(pyramid);
     ++k;
     progress.Advance();
   }
