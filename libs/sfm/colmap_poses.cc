@@ -123,10 +123,16 @@ std::string ThreadsArg(int threads) { return std::to_string(threads > 0 ? thread
 
 }  // namespace
 
+int KeyframeStep(int frames, int max_keyframes) {
+  if (frames <= 0 || max_keyframes <= 0) return 3;
+  return std::max(3, (frames + max_keyframes - 1) / max_keyframes);
+}
+
 void ColmapPosesOptions::Check() const {
   if (video_path.empty() == images_dir.empty()) throw OptionError("poses: give exactly one of --video and --images");
   if (out_dir.empty()) throw OptionError("poses: --out is required");
-  if (step < 1) throw OptionError("poses: --step must be >= 1");
+  if (step < 0) throw OptionError("poses: --step must be >= 0 (0: automatic)");
+  if (max_keyframes < 3) throw OptionError("poses: --max-keyframes must be >= 3");
   if (max_frames < 0) throw OptionError("poses: --max-frames must be >= 0");
   if (camera_model != "SIMPLE_RADIAL" && camera_model != "PINHOLE")
     throw OptionError("poses: --camera-model must be SIMPLE_RADIAL or PINHOLE");
@@ -207,8 +213,9 @@ ColmapPosesSummary EstimatePosesWithColmap(const ColmapPosesOptions& options) {
                                            "fewer than 3 frames");
 
   // 2. Keyframes: every step-th frame and the last one.
+  summary.step = options.step > 0 ? options.step : KeyframeStep(summary.frames, options.max_keyframes);
   std::vector<int> key_index;
-  for (int i = 0; i < summary.frames; i += options.step) key_index.push_back(i);
+  for (int i = 0; i < summary.frames; i += summary.step) key_index.push_back(i);
   if (key_index.back() != summary.frames - 1) key_index.push_back(summary.frames - 1);
   std::vector<std::string> key_names, rest_names;
   std::vector<bool> is_key(summary.frames, false);
@@ -216,7 +223,7 @@ ColmapPosesSummary EstimatePosesWithColmap(const ColmapPosesOptions& options) {
   for (int i = 0; i < summary.frames; ++i) (is_key[i] ? key_names : rest_names).push_back(names[i]);
   summary.keyframes = static_cast<int>(key_names.size());
   spdlog::info("poses: {} frames, {} keyframes (every {}), {} to register", summary.frames, summary.keyframes,
-               options.step, rest_names.size());
+               summary.step, rest_names.size());
   WriteLines(ws / "keyframes.txt", key_names);
   WriteLines(ws / "others.txt", rest_names);
 
@@ -344,7 +351,7 @@ ColmapPosesSummary EstimatePosesWithColmap(const ColmapPosesOptions& options) {
   scene["convention"] = "sparse/: COLMAP text, world-to-camera, OpenCV axes; world up = +z, origin at V's bottom centre";
   json sfm;
   sfm["tool"] = "lfrecon poses (COLMAP, " + options.camera_model + ", one camera)";
-  sfm["step"] = options.step;
+  sfm["step"] = summary.step;
   sfm["keyframes"] = summary.keyframes;
   sfm["keyframes_registered"] = summary.keyframes_registered;
   sfm["registered"] = summary.registered;

@@ -23,7 +23,13 @@ struct ColmapPosesOptions {
   std::filesystem::path video_path;  // frames from a video (OpenCV VideoCapture) ...
   std::filesystem::path images_dir;  // ... or from an image folder (natural name order)
   std::filesystem::path out_dir;     // the dataset folder written
-  int step = 3;                      // every step-th frame is a keyframe (SfM); the rest are registered
+  // Every step-th frame is a keyframe (SfM); the rest are registered. 0:
+  // automatic, KeyframeStep(frames, max_keyframes).
+  int step = 0;
+  // The automatic step keeps at most this many keyframes: the mapper's time
+  // grows faster than linearly with them (161 keyframes: ~450 s of the 480-frame
+  // loop's 1365 s), registration only linearly with the other frames.
+  int max_keyframes = 160;
   int max_frames = 0;                // use only the first N frames (0: all)
   std::string colmap = "colmap";     // the COLMAP binary (looked up in PATH without a '/')
   std::string camera_model = "SIMPLE_RADIAL";  // one camera for all frames: SIMPLE_RADIAL or PINHOLE
@@ -48,9 +54,16 @@ struct ColmapPosesSummary {
   std::vector<std::string> unregistered;
   std::vector<std::pair<std::string, double>> step_seconds;  // frames, feature_extractor, ... in order
   double seconds = 0;
+  int step = 0;  // the step used (the automatic one when options.step is 0)
   WorldFrame world;
   Camera camera;  // the estimated camera (normalised world: unchanged intrinsics)
 };
+
+// The automatic keyframe step: every 3rd frame (the step measured on a
+// 0.75-degree loop), or sparser so that at most max_keyframes frames go through
+// SfM: ceil(frames / max_keyframes). A 3000-frame video gets 19 (a 0.12-degree
+// loop: keyframes ~2.3 degrees apart, as the 480-frame loop's at step 3).
+int KeyframeStep(int frames, int max_keyframes);
 
 // Throws ExternalToolError naming the binary when COLMAP is missing or a step
 // fails (with its exit status and last output lines), InputError for an

@@ -26,7 +26,7 @@ int RunPoses(const ColmapPosesOptions& options) {
       "poses: %d/%d frames posed (%d/%d keyframes in the SfM model, --step %d) in %.1f s; camera %s "
       "%dx%d f=%.1f px; V = [%.3f %.3f %.3f] - [%.3f %.3f %.3f] from %d of %d sparse points; dataset %s\n"
       "poses: %s\n",
-      s.registered, s.frames, s.keyframes_registered, s.keyframes, options.step, s.seconds,
+      s.registered, s.frames, s.keyframes_registered, s.keyframes, s.step, s.seconds,
       CameraModelName(s.camera.model).c_str(), s.camera.width, s.camera.height, s.camera.fx(), V.min.x(), V.min.y(),
       V.min.z(), V.max.x(), V.max.y(), V.max.z(), s.world.points_in_volume, s.world.points_total,
       options.out_dir.c_str(), steps.c_str());
@@ -48,7 +48,11 @@ void AddPosesCommand(CLI::App& root, int* exit_code) {
   cmd->add_option("--video", *video, "Input video (any container/codec OpenCV reads)");
   cmd->add_option("--images", *images, "Input image folder (frames in natural name order)");
   cmd->add_option("--out", *out, "Output dataset folder (created)")->required();
-  cmd->add_option("--step", o->step, "Every K-th frame goes through SfM; the others are registered to that model")
+  cmd->add_option("--step", o->step,
+                  "Every K-th frame goes through SfM; the others are registered to that model (0: automatic, "
+                  "every 3rd frame or sparser so that at most --max-keyframes frames go through SfM)")
+      ->capture_default_str();
+  cmd->add_option("--max-keyframes", o->max_keyframes, "The automatic step's bound on the keyframes")
       ->capture_default_str();
   cmd->add_option("--max-frames", o->max_frames, "Use only the first N frames (0: all)")->capture_default_str();
   cmd->add_option("--colmap", o->colmap, "COLMAP binary")->capture_default_str();

@@ -7,7 +7,7 @@
 # `lfrecon eval` (the "scaled evaluation").
 #   tests/bench/poses_bench.sh                      # 240 frames 320x180, poses + meshes
 #   FRAMES=480 MESH=0 tests/bench/poses_bench.sh    # time for 480 frames
-# Env: OUT (/tmp/poses_bench), FRAMES (240), WIDTH/HEIGHT (320/180), STEP (3), MESH (1),
+# Env: OUT (/tmp/poses_bench), FRAMES (240), WIDTH/HEIGHT (320/180), STEP (0: automatic), MESH (1),
 #      POSES_ARGS (extra lfrecon poses flags), BUILD (build).
 set -euo pipefail
 cd "$(dirname "$0")/../.."
@@ -16,7 +16,7 @@ OUT=${OUT:-/tmp/poses_bench}
 FRAMES=${FRAMES:-240}
 WIDTH=${WIDTH:-320}
 HEIGHT=${HEIGHT:-180}
-STEP=${STEP:-3}
+STEP=${STEP:-0}
 MESH=${MESH:-1}
 LF=$BUILD/bin/lfrecon
 B=$BUILD/bench/sfm_poses_bench

@@ -128,13 +128,28 @@ TEST(ColmapPoses, OptionsAreChecked) {
   o.out_dir = "/tmp/x";
   EXPECT_THROW(o.Check(), OptionError);  // neither --video nor --images
   o.video_path = "v.mkv";
-  o.step = 0;
+  o.step = -1;
   EXPECT_THROW(o.Check(), OptionError);
+  o.step = 0;  // automatic
+  EXPECT_NO_THROW(o.Check());
+  o.max_keyframes = 2;
+  EXPECT_THROW(o.Check(), OptionError);
+  o.max_keyframes = 160;
   o.step = 3;
   o.camera_model = "OPENCV";
   EXPECT_THROW(o.Check(), OptionError);
   o.camera_model = "PINHOLE";
   EXPECT_NO_THROW(o.Check());
+}
+
+TEST(ColmapPoses, AutomaticStepBoundsTheKeyframes) {
+  EXPECT_EQ(KeyframeStep(48, 160), 3);
+  EXPECT_EQ(KeyframeStep(480, 160), 3);
+  EXPECT_EQ(KeyframeStep(481, 160), 4);
+  EXPECT_EQ(KeyframeStep(3000, 160), 19);
+  EXPECT_EQ(KeyframeStep(100000, 160), 625);
+  for (int frames : {10, 480, 481, 1000, 3000, 12345})
+    EXPECT_LE((frames + KeyframeStep(frames, 160) - 1) / KeyframeStep(frames, 160), 160) << frames;
 }
 
 // Cameras on a ring looking at a box of points, in a world with another up,
