@@ -19,18 +19,26 @@ cmake -S . -B "$BUILD" -DCMAKE_CXX_COMPILER=clang++-14 -DCMAKE_BUILD_TYPE=RelWit
 cmake --build "$BUILD" -j"${JOBS:-2}" --target fuzz_all
 echo "fuzz: configure + build $SECONDS s"
 mkdir -p "$BUILD/artifacts"
-failed=()
-for exe in "$BUILD"/fuzz/fuzz_*; do
-  t="${exe##*/fuzz_}"
+# One target per core (${JOBS:-2} at a time): libFuzzer runs one thread.
+fuzz_one() {
+  local exe=$1 t="${1##*/fuzz_}"
+  local log="$BUILD/fuzz_$t.log"
   mkdir -p "$BUILD/corpus/$t"
-  log="$BUILD/fuzz_$t.log"
   if "$exe" -max_total_time="$SECS" -timeout=10 -rss_limit_mb=2048 -print_final_stats=1 \
       -artifact_prefix="$BUILD/artifacts/$t-" "$BUILD/corpus/$t" "tests/fuzz/corpus/$t" >"$log" 2>&1; then
     echo "fuzz: $t: $(grep -o 'number_of_executed_units: [0-9]*' "$log" | grep -o '[0-9]*' || echo '?') inputs in ${SECS} s, no crash"
   else
-    echo "fuzz: $t: FAILED (log $log, input in $BUILD/artifacts/):" >&2
-    grep -E "ERROR|SUMMARY|Test unit written" "$log" | head -5 >&2
-    failed+=("$t")
+    { echo "fuzz: $t: FAILED (log $log, input in $BUILD/artifacts/):"
+      grep -E "ERROR|SUMMARY|Test unit written" "$log" | head -5; } >&2
+    touch "$BUILD/fuzz_$t.failed"
   fi
+}
+rm -f "$BUILD"/fuzz_*.failed
+for exe in "$BUILD"/fuzz/fuzz_*; do
+  fuzz_one "$exe" &
+  while [ "$(jobs -rp | wc -l)" -ge "${JOBS:-2}" ]; do wait -n || true; done
 done
+wait
+failed=()
+for f in "$BUILD"/fuzz_*.failed; do [ -e "$f" ] && { t="${f##*/fuzz_}"; failed+=("${t%.failed}"); }; done
 [ ${#failed[@]} -eq 0 ] || { echo "fuzz: failed: ${failed[*]}" >&2; exit 1; }
