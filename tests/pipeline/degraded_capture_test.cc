@@ -8,6 +8,7 @@
 #include "eval/mesh_metrics.h"
 #include "pipeline/embedded_pipeline.h"
 #include "pipeline/jpeg_source.h"
+#include "pipeline/quarter_loop.h"
 #include "poses/pose_refinement.h"
 #include "synth/sequence.h"
 
@@ -15,13 +16,7 @@ namespace lfrecon {
 namespace {
 
 synth::SynthSequence Loop(bool degraded) {
-  synth::SynthOptions o;
-  o.scene = "tabletop";
-  // A quarter loop, 1.25° apart: dense enough for the method, short enough for a test.
-  o.frames = 72;
-  o.loops = 0.25;
-  o.width = 192;
-  o.height = 108;
+  synth::SynthOptions o = testing::TabletopQuarterLoop();
   o.render.noise_sigma = degraded ? 0.01 : 0.005;
   if (degraded) {
     o.degradation.exposure_drift = 0.04;

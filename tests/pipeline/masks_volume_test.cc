@@ -13,6 +13,7 @@
 #include "eval/mesh_metrics.h"
 #include "io/dataset.h"
 #include "pipeline/embedded_pipeline.h"
+#include "pipeline/quarter_loop.h"
 #include "synth/sequence.h"
 #include "synth/writer.h"
 
@@ -50,12 +51,7 @@ Outcome Reconstruct(const fs::path& dir, const synth::SynthSequence& seq) {
 }
 
 TEST(MasksVolume, MeshFromTheMasksVolumeIsAtLeastAsGoodAsFromSceneJson) {
-  synth::SynthOptions o;
-  o.scene = "tabletop";
-  o.frames = 72;
-  o.loops = 0.25;
-  o.width = 192;
-  o.height = 108;
+  synth::SynthOptions o = testing::TabletopQuarterLoop();
   o.render.noise_sigma = 0.005;
   const synth::SynthSequence seq = synth::SynthSequence::Create(o);
   testing::TempDir tmp;
