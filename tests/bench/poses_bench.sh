@@ -33,7 +33,7 @@ start=$(date +%s.%N)
 # shellcheck disable=SC2086
 "$LF" poses --video "$video" --out "$OUT/posed" --step "$STEP" ${POSES_ARGS:-} 2> "$OUT/poses.log"
 end=$(date +%s.%N)
-echo "poses: $FRAMES frames ${WIDTH}x${HEIGHT} step $STEP in $(echo "$end - $start" | bc) s wall"
+echo "poses: $FRAMES frames ${WIDTH}x${HEIGHT} --step $STEP (0: automatic; the step used is in $OUT/posed/scene.json) in $(echo "$end - $start" | bc) s wall"
 "$B" align --estimated "$OUT/posed" --truth "$OUT/gen" --json "$OUT/align.json"
 
 if [ "$MESH" = 1 ]; then
