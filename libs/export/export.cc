@@ -17,17 +17,12 @@
 #include "io/frame_source.h"
 #include "io/ply.h"
 #include "util/error.h"
+#include "util/path.h"
 
 namespace lfrecon {
 namespace fs = std::filesystem;
 
 namespace {
-
-std::string LowerExtension(const fs::path& p) {
-  std::string e = p.extension().string();
-  std::transform(e.begin(), e.end(), e.begin(), [](unsigned char c) { return std::tolower(c); });
-  return e;
-}
 
 void CreateDirs(const fs::path& dir) {
   std::error_code ec;

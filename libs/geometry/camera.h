@@ -71,6 +71,12 @@ struct Camera {
   // The distortion model on normalised coordinates, and its iterative inverse.
   Eigen::Vector2d Distort(const Eigen::Vector2d& undistorted) const;
   Eigen::Vector2d Undistort(const Eigen::Vector2d& distorted) const;
+
+  // Same model, size and parameters (exactly).
+  bool operator==(const Camera& other) const {
+    return model == other.model && width == other.width && height == other.height && params == other.params;
+  }
+  bool operator!=(const Camera& other) const { return !(*this == other); }
 };
 
 }  // namespace lfrecon

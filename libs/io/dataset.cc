@@ -38,10 +38,6 @@ bool IsFile(const fs::path& p) {
   return fs::is_regular_file(p, ec);
 }
 
-bool SameCamera(const Camera& a, const Camera& b) {
-  return a.model == b.model && a.width == b.width && a.height == b.height && a.params == b.params;
-}
-
 // `path` relative to `dir` if it lies inside it, else empty.
 std::string RelativeInside(const fs::path& path, const fs::path& dir) {
   std::error_code ec;
@@ -155,7 +151,7 @@ class DatasetFrameSource : public FrameSource {
 
   const Undistorter& UndistorterFor(const Camera& camera) {
     for (const auto& [cam, undistorter] : undistorters_)
-      if (SameCamera(cam, camera)) return *undistorter;
+      if (cam == camera) return *undistorter;
     undistorters_.emplace_back(camera, std::make_unique<Undistorter>(camera));
     return *undistorters_.back().second;
   }
@@ -374,7 +370,7 @@ Dataset Dataset::Open(const DatasetOptions& options) {
                 [](const PoseEntry& a, const PoseEntry& b) { return NaturalNameLess(a.name, b.name); });
       entries.erase(std::unique(entries.begin(), entries.end(),
                                 [](const PoseEntry& a, const PoseEntry& b) {
-                                  return a.name == b.name && SameCamera(a.camera, b.camera) &&
+                                  return a.name == b.name && a.camera == b.camera &&
                                          a.cam_from_world.ToMatrix() == b.cam_from_world.ToMatrix();
                                 }),
                     entries.end());

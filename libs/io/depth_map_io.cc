@@ -16,16 +16,12 @@
 
 #include "io/input_text.h"
 #include "util/error.h"
+#include "util/path.h"
 
 namespace lfrecon {
 namespace fs = std::filesystem;
 
 namespace {
-
-std::string Lower(std::string s) {
-  std::transform(s.begin(), s.end(), s.begin(), [](unsigned char c) { return std::tolower(c); });
-  return s;
-}
 
 cv::Mat ToFloat32(const cv::Mat& map) {
   cv::Mat f;
@@ -257,7 +253,7 @@ cv::Mat ReadExr(const fs::path& path) {
 }
 
 cv::Mat ReadDepthMap(const fs::path& path) {
-  const std::string ext = Lower(path.extension().string());
+  const std::string ext = LowerExtension(path);
   if (ext == ".pfm") return ReadPfm(path);
   if (ext == ".exr") return ReadExr(path);
   throw InputError(path.string(), "unsupported depth map format " + InputToken(ext) + " (expected .pfm or .exr)");

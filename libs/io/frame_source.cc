@@ -16,19 +16,15 @@
 #include "io/depth_map_io.h"
 #include "io/image_header.h"
 #include "util/error.h"
+#include "util/path.h"
 
 namespace lfrecon {
 namespace fs = std::filesystem;
 
 namespace {
 
-std::string Lower(std::string s) {
-  std::transform(s.begin(), s.end(), s.begin(), [](unsigned char c) { return std::tolower(c); });
-  return s;
-}
-
 bool IsImageExtension(const fs::path& path) {
-  const std::string ext = Lower(path.extension().string());
+  const std::string ext = LowerExtension(path);
   return ext == ".png" || ext == ".jpg" || ext == ".jpeg" || ext == ".tif" || ext == ".tiff" ||
          ext == ".exr" || ext == ".bmp";
 }
@@ -232,7 +228,7 @@ cv::Mat ReadImageFloat(const fs::path& path, std::optional<cv::Size> expect) {
   const std::string file = path.string();
   std::error_code ec;
   if (!fs::is_regular_file(path, ec)) throw InputError(file, "image file does not exist");
-  if (Lower(path.extension().string()) == ".exr") EnableOpenCvExr();
+  if (LowerExtension(path) == ".exr") EnableOpenCvExr();
   std::string bytes;
   {
     std::ifstream in(path, std::ios::binary);
@@ -270,7 +266,7 @@ void WriteImageFloat(const fs::path& path, const cv::Mat& image, int jpeg_qualit
     out = image;
   }
   std::vector<int> params;
-  const std::string ext = Lower(path.extension().string());
+  const std::string ext = LowerExtension(path);
   if (ext == ".jpg" || ext == ".jpeg") params = {cv::IMWRITE_JPEG_QUALITY, jpeg_quality};
   bool ok = false;
   try {

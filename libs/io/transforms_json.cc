@@ -141,10 +141,6 @@ Rigid3d ParsePose(const json& frame, const std::string& file, const std::string&
   return world_from_cam.Inverse();
 }
 
-bool SameCamera(const Camera& a, const Camera& b) {
-  return a.model == b.model && a.width == b.width && a.height == b.height && a.params == b.params;
-}
-
 void PutIntrinsics(const Camera& camera, json* out) {
   json& j = *out;
   j["w"] = camera.width;
@@ -224,7 +220,7 @@ std::vector<TransformsFrame> ReadTransformsJson(const fs::path& path, const Tran
 
 void WriteTransformsJson(const std::vector<TransformsFrame>& frames, const fs::path& path) {
   bool shared = !frames.empty();
-  for (const TransformsFrame& f : frames) shared = shared && SameCamera(f.camera, frames.front().camera);
+  for (const TransformsFrame& f : frames) shared = shared && f.camera == frames.front().camera;
   json root = json::object();
   if (shared) PutIntrinsics(frames.front().camera, &root);
   json list = json::array();

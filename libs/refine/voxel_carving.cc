@@ -19,8 +19,6 @@
 namespace lfrecon {
 namespace {
 
-const Eigen::Vector3i kSix[6] = {{1, 0, 0}, {-1, 0, 0}, {0, 1, 0}, {0, -1, 0}, {0, 0, 1}, {0, 0, -1}};
-
 std::uint64_t Key(const Eigen::Vector3i& v) {
   const auto u = [](int x) { return static_cast<std::uint64_t>(x + (1 << 20)) & 0x1FFFFFull; };
   return u(v.x()) | (u(v.y()) << 21) | (u(v.z()) << 42);
@@ -67,7 +65,7 @@ std::unordered_map<std::uint64_t, Eigen::Vector3d> VoxelNormals(const VoxelGrid&
 }
 
 bool BordersUnknown(const VoxelGrid& grid, const Eigen::Vector3i& v) {
-  for (const Eigen::Vector3i& d : kSix)
+  for (const Eigen::Vector3i& d : kSixNeighbours)
     if (grid.State(v + d) == VoxelState::kUnknown) return true;
   return false;
 }
@@ -75,7 +73,7 @@ bool BordersUnknown(const VoxelGrid& grid, const Eigen::Vector3i& v) {
 // Where no mesh vertex reached an exposed voxel: the mean direction to its free neighbours.
 Eigen::Vector3d FallbackNormal(const VoxelGrid& grid, const Eigen::Vector3i& v) {
   Eigen::Vector3d n = Eigen::Vector3d::Zero();
-  for (const Eigen::Vector3i& d : kSix)
+  for (const Eigen::Vector3i& d : kSixNeighbours)
     if (grid.State(v + d) == VoxelState::kFree) n += d.cast<double>();
   const double len = n.norm();
   return len > 1e-12 ? Eigen::Vector3d(n / len) : Eigen::Vector3d::Zero();
@@ -264,7 +262,7 @@ CarvingResult VoxelCarving(VoxelGrid* grid, const std::vector<ColorView>& color_
       const auto [v, d] = queue.front();
       queue.pop_front();
       if (d >= options.region_depth) continue;
-      for (const Eigen::Vector3i& o : kSix) {
+      for (const Eigen::Vector3i& o : kSixNeighbours) {
         const Eigen::Vector3i u = v + o;
         if (grid->State(u) == VoxelState::kOccupied && region.insert(Key(u)).second) queue.emplace_back(u, d + 1);
       }
@@ -326,7 +324,7 @@ Eigen::Vector3d SurfacePoint(const VoxelGrid& grid, const Eigen::Vector3i& v) {
   const float hv = grid.Value(v);
   Eigen::Vector3d p = Eigen::Vector3d::Zero();
   int crossings = 0;
-  for (const Eigen::Vector3i& d : kSix) {
+  for (const Eigen::Vector3i& d : kSixNeighbours) {
     const Eigen::Vector3i u = v + d;
     if (grid.State(u) != VoxelState::kFree) continue;
     const float hu = grid.Value(u);

@@ -34,8 +34,6 @@ std::uint64_t EdgeKey(const Eigen::Vector3i& c0, int axis) {
   return u(c0.x()) | (u(c0.y()) << 20) | (u(c0.z()) << 40) | (static_cast<std::uint64_t>(axis) << 60);
 }
 
-const Eigen::Vector3i kSix[6] = {{1, 0, 0}, {-1, 0, 0}, {0, 1, 0}, {0, -1, 0}, {0, 0, 1}, {0, 0, -1}};
-
 }  // namespace
 
 VoxelGrid::VoxelGrid(const BoundingBox& volume, double voxel_size, double threshold)
@@ -123,7 +121,7 @@ std::vector<Eigen::Vector3i> VoxelGrid::OccupiedVoxels() const {
 
 bool VoxelGrid::IsExposed(const Eigen::Vector3i& ijk) const {
   if (State(ijk) != VoxelState::kOccupied) return false;
-  for (const Eigen::Vector3i& d : kSix)
+  for (const Eigen::Vector3i& d : kSixNeighbours)
     if (State(ijk + d) == VoxelState::kFree) return true;
   return false;
 }

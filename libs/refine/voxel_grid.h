@@ -18,6 +18,10 @@
 
 namespace lfrecon {
 
+// The six face neighbours of a voxel (used by the voxel grid and carving).
+inline const Eigen::Vector3i kSixNeighbours[6] = {{1, 0, 0}, {-1, 0, 0}, {0, 1, 0},
+                                                  {0, -1, 0}, {0, 0, 1}, {0, 0, -1}};
+
 class ProbabilisticFusion;
 
 enum class VoxelState : std::uint8_t {

@@ -16,6 +16,7 @@
 #include "io/frame_source.h"
 #include "sfm/subprocess.h"
 #include "util/error.h"
+#include "util/path.h"
 #include "util/progress.h"
 
 namespace lfrecon {
@@ -25,8 +26,7 @@ using json = nlohmann::json;
 namespace {
 
 bool IsImageName(const fs::path& p) {
-  std::string ext = p.extension().string();
-  std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char c) { return std::tolower(c); });
+  const std::string ext = LowerExtension(p);
   return ext == ".png" || ext == ".jpg" || ext == ".jpeg" || ext == ".tif" || ext == ".tiff" || ext == ".bmp";
 }
 
