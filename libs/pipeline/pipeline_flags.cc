@@ -21,6 +21,10 @@ PipelineOptions OptionsFromFlags(const ReconstructionFlags& f) {
   }
   if (f.no_mask_free_space) options.mask_free_space.confidence = 0;
   if (f.mask_carving) options.refine_options.carving.carve_outside_masks = true;
+  if (f.chroma_weight) {
+    if (!(*f.chroma_weight >= 0 && *f.chroma_weight <= 1)) throw OptionError("--chroma-weight must be in [0, 1]");
+    options.propagation.photo.chroma_weight = *f.chroma_weight;
+  }
   options.Check();
   return options;
 }

@@ -24,6 +24,9 @@ struct ReconstructionFlags {
   // Object masks also carve the fused voxels outside them (--mask-carving):
   // CarvingOptions::carve_outside_masks on (used where the refinement carves).
   bool mask_carving = false;
+  // Weight of chroma in ρ's colour test (eq. 9), in [0, 1]: PhotoconsistencyOptions::chroma_weight
+  // (propagation/colour_difference.h); unset: its default (--chroma-weight).
+  std::optional<double> chroma_weight;
 };
 
 // PipelineOptions defaults with the flags applied; checked (PipelineOptions::Check). Throws OptionError.

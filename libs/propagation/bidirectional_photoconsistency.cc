@@ -8,6 +8,7 @@
 #include <cmath>
 #include <opencv2/imgproc.hpp>
 
+#include "propagation/colour_difference.h"
 #include "propagation/image_sampling.h"
 #include "propagation/neighbor_views.h"
 #include "util/error.h"
@@ -16,6 +17,7 @@ namespace lfrecon {
 
 void PhotoconsistencyOptions::Check() const {
   LFRECON_CHECK_OPTION(sigma_p > 0);
+  LFRECON_CHECK_OPTION(chroma_weight >= 0 && chroma_weight <= 1);
   LFRECON_CHECK_OPTION(samples_per_side >= 1 && samples_per_side <= 16);
   LFRECON_CHECK_OPTION(sample_step_px > 0 && sample_step_px <= 8);
   LFRECON_CHECK_OPTION(max_view_angle_deg > 0 && max_view_angle_deg < 90);
@@ -228,10 +230,11 @@ void PhotoconsistencyAccumulator::Add(const ViewImage& neighbor) {
   const float inv_two_sigma2 = static_cast<float>(1.0 / (2.0 * o.sigma_p * o.sigma_p * S));
   const std::size_t per_pixel = static_cast<std::size_t>(6 * S + (o.centre_consistency ? 9 : 0));
   const float inv_two_sigma2_centre = static_cast<float>(1.0 / (2.0 * o.sigma_p * o.sigma_p * 3));
-  // Σ‖f − g‖² of n samples at y0 + (first + i·step)·dy (i = 0..n−1) in the
-  // neighbour against the reference's at `ref` (3 floats each); false when a
-  // sample leaves the neighbour.
-  const auto ssd_along = [&image](const Eigen::Vector3f& y0, const Eigen::Vector3f& dy, int first, int step, int n,
+  // Σ‖f − g‖² (chroma weighted: ColourDifference2) of n samples at
+  // y0 + (first + i·step)·dy (i = 0..n−1) in the neighbour against the
+  // reference's at `ref` (3 floats each); false when a sample leaves the neighbour.
+  const float chroma_weight = static_cast<float>(o.chroma_weight);
+  const auto ssd_along = [&image, chroma_weight](const Eigen::Vector3f& y0, const Eigen::Vector3f& dy, int first, int step, int n,
                                   const float* ref, float* ssd) {
     *ssd = 0;
     for (int i = 0; i < n; ++i) {
@@ -239,7 +242,7 @@ void PhotoconsistencyAccumulator::Add(const ViewImage& neighbor) {
       Eigen::Vector3f g;
       if (!(y.z() > 0) || !SampleBgr(image, y.x() / y.z(), y.y() / y.z(), &g)) return false;
       const float* fk = ref + 3 * i;
-      *ssd += (Eigen::Vector3f(fk[0], fk[1], fk[2]) - g).squaredNorm();
+      *ssd += ColourDifference2(Eigen::Vector3f(fk[0], fk[1], fk[2]), g, chroma_weight);
     }
     return true;
   };

@@ -8,6 +8,7 @@
 #include <filesystem>
 #include <iostream>
 #include <nlohmann/json.hpp>
+#include <optional>
 
 #include "commands.h"
 #include "dataset_flags.h"
@@ -37,6 +38,7 @@ struct RunArgs {
   bool poisson = false;
   int color_views = 8;
   double sigma_s = 0;
+  std::optional<double> chroma_weight;
   bool no_refine_poses = false;
   bool no_mask_free_space = false;
   bool mask_carving = false;
@@ -80,6 +82,7 @@ int RunPipeline(const RunArgs& args) {
   flags.max_frame_gap = args.max_frame_gap;
   flags.no_mask_free_space = args.no_mask_free_space;
   flags.mask_carving = args.mask_carving;
+  flags.chroma_weight = args.chroma_weight;
   PipelineOptions options = OptionsFromFlags(flags);
   const Dataset ds = Dataset::Open(args.data.Resolve());
   if (!args.views.empty()) options.views = ParseViewRange(args.views, ds.NumViews());
@@ -173,6 +176,8 @@ void AddRunCommand(CLI::App& root, int* exit_code) {
   cmd->add_flag("--no-densify", args->no_densify, "Fuse the filtered sparse maps without densification (§4)");
   cmd->add_option("--sigma-s", args->sigma_s,
                   "σ_s of the fusion's confidence model (eq. 12-13); default 0.15 for dense maps, 0.7 with --no-densify");
+  cmd->add_option("--chroma-weight", args->chroma_weight,
+                  "Weight of chroma in the bidirectional photo-consistency ρ (eq. 9), 0..1 (default 0.5: JPEG and video keep chroma at half resolution); 1: plain RGB distance, the paper's");
   cmd->add_flag("--no-refine-poses", args->no_refine_poses,
                 "Use the given poses as they are. By default they are first refined against the frames (corner "
                 "tracks + bundle adjustment with a prior around each given pose; OUT/sparse_refined/): poses with "

@@ -249,5 +249,15 @@ TEST(ReconstructionPlan, MaxFrameGapFlag) {
   EXPECT_THROW(OptionsFromFlags(f), OptionError);
 }
 
+// --chroma-weight: sets ρ's chroma weight (unset: the default); outside [0, 1] is refused.
+TEST(ReconstructionPlan, ChromaWeightFlag) {
+  ReconstructionFlags f;
+  EXPECT_EQ(OptionsFromFlags(f).propagation.photo.chroma_weight, PhotoconsistencyOptions{}.chroma_weight);
+  f.chroma_weight = 0.25;
+  EXPECT_EQ(OptionsFromFlags(f).propagation.photo.chroma_weight, 0.25);
+  f.chroma_weight = 1.5;
+  EXPECT_THROW(OptionsFromFlags(f), OptionError);
+}
+
 }  // namespace
 }  // namespace lfrecon

@@ -10,6 +10,7 @@
 
 #include "../depth/synth_views.h"
 #include "geometry/rigid3.h"
+#include "propagation/colour_difference.h"
 #include "util/error.h"
 
 namespace lfrecon {
@@ -339,6 +340,22 @@ TEST(BidirectionalPhotoconsistency, AccumulatorOneNeighbourAtATimeIsBitIdentical
   EXPECT_EQ(cv::countNonZero(none.c_plus), 0);
 }
 
+TEST(ColourDifference, SplitsLumaFromChroma) {
+  const Eigen::Vector3f a(0.3f, 0.5f, 0.7f);
+  // Weight 1: the plain squared RGB distance, exactly.
+  const Eigen::Vector3f b(0.1f, 0.6f, 0.2f);
+  EXPECT_EQ(ColourDifference2(a, b, 1.0f), (a - b).squaredNorm());
+  // A grey difference is all luma: 3·k² at any chroma weight.
+  const Eigen::Vector3f grey = a + Eigen::Vector3f::Constant(0.04f);
+  EXPECT_NEAR(ColourDifference2(grey, a, 0.0f), 3 * 0.04f * 0.04f, 1e-7f);
+  EXPECT_NEAR(ColourDifference2(grey, a, 0.5f), 3 * 0.04f * 0.04f, 1e-7f);
+  // A difference that leaves Rec. 601 luma (BGR weights 0.114, 0.587, 0.299)
+  // unchanged is all chroma: scaled by the weight, zero at weight 0.
+  const Eigen::Vector3f e(0.587f * 0.1f, -0.114f * 0.1f, 0.0f);  // 0.114·e_B + 0.587·e_G = 0
+  EXPECT_NEAR(ColourDifference2(a + e, a, 0.0f), 0.0f, 1e-9f);
+  EXPECT_NEAR(ColourDifference2(a + e, a, 0.25f), 0.25f * e.squaredNorm(), 1e-7f);
+}
+
 TEST(BidirectionalPhotoconsistency, OptionsAreChecked) {
   PhotoconsistencyOptions o;
   EXPECT_NO_THROW(o.Check());
@@ -352,6 +369,9 @@ TEST(BidirectionalPhotoconsistency, OptionsAreChecked) {
   EXPECT_THROW(o.Check(), OptionError);
   o = PhotoconsistencyOptions();
   o.max_view_angle_deg = 0;
+  EXPECT_THROW(o.Check(), OptionError);
+  o = PhotoconsistencyOptions();
+  o.chroma_weight = 1.5;
   EXPECT_THROW(o.Check(), OptionError);
 }
 
