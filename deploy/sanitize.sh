@@ -14,13 +14,14 @@
 # fusion, export, refine). Only the libraries, daemons and test executables
 # of the subset are built, as one target (test_subset: both cores busy; the
 # benchmarks and the other tests are not built). ASAN_TESTS=. builds and runs everything.
+# A unity build like deploy/build.sh's (LFRECON_UNITY=OFF: one file per unit).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 BUILD="${ASAN_BUILD_DIR:-build-asan}"
 TESTS="${ASAN_TESTS:-^(util|geometry|io|cli|integration|fuzz)_}"
 OPT="${ASAN_OPT:--O1 -g1}"
 cmake -S . -B "$BUILD" -DCMAKE_BUILD_TYPE=RelWithDebInfo "-DCMAKE_CXX_FLAGS_RELWITHDEBINFO=$OPT -DNDEBUG" \
-  -DLFRECON_BUILD_BENCHMARKS=OFF "-DLFRECON_TEST_SUBSET=$TESTS" \
+  -DLFRECON_BUILD_BENCHMARKS=OFF "-DLFRECON_TEST_SUBSET=$TESTS" "-DCMAKE_UNITY_BUILD=${LFRECON_UNITY:-ON}" \
   "-DCMAKE_CXX_FLAGS=-fsanitize=address,undefined -fno-sanitize-recover=undefined -fno-omit-frame-pointer" \
   >"$BUILD.configure.log" 2>&1 || { cat "$BUILD.configure.log"; exit 1; }
 # test_subset (tests/CMakeLists.txt): the executables of the tests matching

@@ -4,8 +4,9 @@
 # build of the fuzz targets only, 10 s each; LFRECON_FUZZ=0 skips it) and the
 # readers', CLI, integration and fuzz-corpus tests under ASan+UBSan
 # (deploy/sanitize.sh, a second build of only what those tests need, -O1 -g1;
-# LFRECON_SANITIZE=0 skips it). CI budget: well under 40 min on 2 cores; each
-# phase prints its wall time.
+# LFRECON_SANITIZE=0 skips it). CI aim: under ~40 min on 2 cores (the last
+# clean-clone runs took 47-51 min, the sanitizer phase 28 of them; the builds
+# are unity builds since to cut that); each phase prints its wall time.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 start=$SECONDS
