@@ -517,7 +517,8 @@ TEST_F(FaultsTest, WorkerErrorIsRetriedOnAnotherWorker) {
     for (auto at = log.find(what); at != std::string::npos; at = log.find(what, at + 1)) ++n;
     return n;
   };
-  for (int i = 0; i < 400 && (heard("depth") < 2 || heard("propagate") < 2); ++i)
+  // 60 s: under ASan beside other tests the aggregator once wrote no line in 10 s.
+  for (int i = 0; i < 2400 && (heard("depth") < 2 || heard("propagate") < 2); ++i)
     std::this_thread::sleep_for(milliseconds(25));
   ASSERT_EQ(heard("depth"), 2) << agg->LogTail();
   ASSERT_EQ(heard("propagate"), 2) << agg->LogTail();
