@@ -187,6 +187,7 @@ void PoseRefinementOptions::Check() const {
   LFRECON_CHECK_OPTION(std::isfinite(outlier_sigmas) && outlier_sigmas >= 0);
   LFRECON_CHECK_OPTION(std::isfinite(min_outlier_px) && min_outlier_px > 0);
   LFRECON_CHECK_OPTION(max_iterations >= 1 && max_iterations <= 1000);
+  LFRECON_CHECK_OPTION(outlier_round_iterations >= 1 && outlier_round_iterations <= 1000);
   LFRECON_CHECK_OPTION(num_threads >= 1 && num_threads <= 256);
 }
 
@@ -420,7 +421,9 @@ PoseRefinementResult RefinePoses(FrameSource& frames, const std::vector<PinholeV
   solver.logging_type = ceres::SILENT;
   solver.minimizer_progress_to_stdout = false;
   ceres::Solver::Summary summary;
+  if (options.outlier_sigmas > 0) solver.max_num_iterations = options.outlier_round_iterations;
   ceres::Solve(solver, &problem, &summary);
+  solver.max_num_iterations = options.max_iterations;
   spdlog::debug("pose refinement, first round: {}", summary.FullReport());
   if (summary.IsSolutionUsable() && options.outlier_sigmas > 0) {
     // Second round without the observations the first one could not explain
