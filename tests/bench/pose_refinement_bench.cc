@@ -93,6 +93,7 @@ int main(int argc, char** argv) {
   app.add_option("--local-mean-frames", o.local_mean_frames);
   app.add_option("--outlier-sigmas", o.outlier_sigmas);
   app.add_option("--outlier-round-iterations", o.outlier_round_iterations);
+  app.add_option("--max-iterations", o.max_iterations);
   bool verbose = false;
   app.add_flag("-v,--verbose", verbose, "Debug logging (the adjustment's full report)");
   CLI11_PARSE(app, argc, argv);
