@@ -94,6 +94,8 @@ int main(int argc, char** argv) {
   app.add_option("--outlier-sigmas", o.outlier_sigmas);
   app.add_option("--outlier-round-iterations", o.outlier_round_iterations);
   app.add_option("--max-iterations", o.max_iterations);
+  app.add_option("--lk-levels", o.lk_levels);
+  app.add_option("--lk-window", o.lk_window_px);
   bool verbose = false;
   app.add_flag("-v,--verbose", verbose, "Debug logging (the adjustment's full report)");
   CLI11_PARSE(app, argc, argv);
