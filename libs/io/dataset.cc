@@ -315,7 +315,7 @@ Dataset Dataset::Open(const DatasetOptions& options) {
     pose_file = (model_dir / (binary ? "images.bin" : "images.txt")).string();
     const ColmapModel model = ReadColmapModel(model_dir);
     for (const ColmapImage& image : model.images)
-      entries.push_back({image.name, model.cameras.at(image.camera_id), image.cam_from_world});
+      entries.push_back({image.name, model.cameras.at(image.camera_id), image.cam_from_world, {}});
   } else {
     ds.pose_source_ = split_files.size() > 1 ? "transforms splits" : transforms_path.filename().string();
     if (split_files.empty()) split_files.push_back(transforms_path);
