@@ -25,6 +25,11 @@ PipelineOptions OptionsFromFlags(const ReconstructionFlags& f) {
     if (!(*f.chroma_weight >= 0 && *f.chroma_weight <= 1)) throw OptionError("--chroma-weight must be in [0, 1]");
     options.propagation.photo.chroma_weight = *f.chroma_weight;
   }
+  if (f.view_step_deg) {
+    if (!(*f.view_step_deg > 0 && *f.view_step_deg < 90)) throw OptionError("--view-step-deg must be in (0, 90)");
+    if (f.all_views) throw OptionError("--view-step-deg and --all-views exclude each other");
+    options.selection.min_step_deg = *f.view_step_deg;
+  }
   options.Check();
   return options;
 }

@@ -27,6 +27,9 @@ struct ReconstructionFlags {
   // Weight of chroma in ρ's colour test (eq. 9), in [0, 1]: PhotoconsistencyOptions::chroma_weight
   // (propagation/colour_difference.h); unset: its default (--chroma-weight).
   std::optional<double> chroma_weight;
+  // Degrees between consecutive selected views (ViewSelectionOptions::min_step_deg, > 0 and < 90);
+  // unset: its default (--view-step-deg).
+  std::optional<double> view_step_deg;
 };
 
 // PipelineOptions defaults with the flags applied; checked (PipelineOptions::Check). Throws OptionError.

@@ -24,15 +24,17 @@ namespace lfrecon {
 // serves as a depth / photoconsistency neighbour of the selected views; only
 // the selected views get depth maps of their own, densification and fusion.
 // Only the selected views vote in the §3.2 filter (PlanDepth), so no other
-// view needs a sparse map. Views closer than 1° add little that their
-// neighbours' maps do not: on the figurines (0.75° apart, so every second view
-// is selected) `lfrecon run` took 289 CPU-s with every view and 140 with the
-// selection, F@5mm 0.827 -> 0.835, thin recall 0.874 -> 0.886
-// (docs/benchmarks.md, "Fewer views, relative vote saturation", with the
-// generated sets). Sequences at least 1° apart (the demo 1.5°) keep every view.
+// view needs a sparse map. Views closer than 2° add little that their
+// neighbours' maps do not, and fusing fewer of them adds less of their halo:
+// on the figurines (0.75° apart) `lfrecon run` took 289 CPU-s with every view,
+// 140 with every second (1°, "Fewer views, relative vote saturation" in
+// docs/benchmarks.md) and 95 with every third (2°), F@5mm 0.827 -> 0.836 ->
+// 0.843, thin recall 0.874 -> 0.899 -> 0.906; at 2° every set of the quality
+// table gained F@5mm and halved its CPU ("View step 2°"). The demo (1.5°
+// apart) keeps every second view.
 struct ViewSelectionOptions {
   bool enabled = true;        // false: every view (lfrecon run / submit --all-views)
-  double min_step_deg = 1.0;  // degrees between consecutive selected views; 0: every view
+  double min_step_deg = 2.0;  // degrees between consecutive selected views; 0: every view
   void Check() const;         // throws OptionError
 };
 

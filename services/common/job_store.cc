@@ -604,6 +604,7 @@ ReconstructionFlags JobFlags(const pb::JobOptions& o) {
   if (o.has_max_frame_gap()) f.max_frame_gap = o.max_frame_gap();
   f.no_mask_free_space = o.no_mask_free_space();
   f.mask_carving = o.mask_carving();
+  if (o.has_view_step_deg()) f.view_step_deg = o.view_step_deg();
   return f;
 }
 

@@ -39,6 +39,7 @@ struct RunArgs {
   int color_views = 8;
   double sigma_s = 0;
   std::optional<double> chroma_weight;
+  std::optional<double> view_step_deg;
   bool no_refine_poses = false;
   bool no_mask_free_space = false;
   bool mask_carving = false;
@@ -83,6 +84,7 @@ int RunPipeline(const RunArgs& args) {
   flags.no_mask_free_space = args.no_mask_free_space;
   flags.mask_carving = args.mask_carving;
   flags.chroma_weight = args.chroma_weight;
+  flags.view_step_deg = args.view_step_deg;
   PipelineOptions options = OptionsFromFlags(flags);
   const Dataset ds = Dataset::Open(args.data.Resolve());
   if (!args.views.empty()) options.views = ParseViewRange(args.views, ds.NumViews());
@@ -162,10 +164,12 @@ void AddRunCommand(CLI::App& root, int* exit_code) {
   cmd->add_option("--voxel-mm", args->voxel_mm, "Voxel edge in mm (default: the longest side of V / 256)");
   cmd->add_flag("--write-depth", args->write_depth, "Also write the fused per-view depth maps (depth/, confidence/ PFM)");
   cmd->add_option("--views", args->views, "Views to process, A:B:STEP (0-based, B exclusive); default: selected "
-                   "automatically, views >= 1 deg apart (lfrecon info: mean_step_deg; a sequence 1 deg apart or more "
-                   "keeps every view). Every frame is still read and serves as a neighbour");
+                   "automatically, views >= 2 deg apart (--view-step-deg; lfrecon info: mean_step_deg; a sequence 2 deg "
+                   "apart or more keeps every view). Every frame is still read and serves as a neighbour");
   cmd->add_flag("--all-views", args->all_views,
                 "Process every view (no view selection): depth and fusion of each frame, also on a dense video");
+  cmd->add_option("--view-step-deg", args->view_step_deg,
+                  "Degrees between consecutive selected views (default 2): larger processes fewer views, faster");
   cmd->add_option("--max-frame-gap", args->max_frame_gap,
                   "Views more than this many frames apart are never neighbours (0: no limit; default 1000). "
                   "`lfrecon stream --max-frame-gap` with the same bound computes the same mesh");

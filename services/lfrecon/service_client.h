@@ -54,6 +54,7 @@ struct JobOptionFlags {
   bool no_densify = false, all_views = false, no_mask_free_space = false, mask_carving = false;
   int color_views = 8;
   int max_frame_gap = -1;  // -1: unset (the default)
+  double view_step_deg = -1;  // -1: unset (the default)
   void AddTo(CLI::App* cmd);
   // Checked as the ingest daemon and `lfrecon run` check them (OptionError: exit 2).
   pb::JobOptions ToProto() const;

@@ -115,7 +115,9 @@ void JobOptionFlags::AddTo(CLI::App* cmd) {
   cmd->add_flag("--no-densify", no_densify, "Fuse the filtered sparse maps (as lfrecon run)");
   cmd->add_flag("--all-views", all_views,
                 "Process every view (as lfrecon run --all-views); by default a dense video's views are selected "
-                ">= 1 deg apart");
+                ">= 2 deg apart");
+  cmd->add_option("--view-step-deg", view_step_deg,
+                  "Degrees between consecutive selected views (as lfrecon run --view-step-deg; default 2)");
   cmd->add_option("--color-views", color_views, "Frames used to colour the mesh (0: none)")->capture_default_str();
   cmd->add_option("--max-frame-gap", max_frame_gap,
                   "Views more than this many frames apart are never neighbours (as lfrecon run --max-frame-gap; 0: "
@@ -141,6 +143,7 @@ pb::JobOptions JobOptionFlags::ToProto() const {
   o.set_color_views(color_views);
   o.set_all_views(all_views);
   if (max_frame_gap != -1) o.set_max_frame_gap(max_frame_gap);
+  if (view_step_deg != -1) o.set_view_step_deg(view_step_deg);
   o.set_no_mask_free_space(no_mask_free_space);
   o.set_mask_carving(mask_carving);
   svc::JobPipelineOptions(o);  // every job option checked here, as lfrecon run does (exit 2)

@@ -1,7 +1,7 @@
 // The service and `lfrecon run` follow one reconstruction plan: on a generated
 // arc spaced 0.3° apart (under the hierarchy grid's 0.5°, where the workers
 // used to thin neighbours differently for want of on_grid flags), the same
-// views are selected (every fourth: 1.2°, the selection being >= 1°), get
+// views are selected (every fourth: 1.2°, with the selection at >= 1°, the job option and run flag --view-step-deg 1), get
 // sparse maps (the selected views only: they are the filter's voters) and give
 // bit-identical dense maps; the fused meshes then agree.
 #include <gtest/gtest.h>
@@ -30,6 +30,7 @@ using lfrecon::testing::RunShell;
 const std::string kBin = std::string(LFRECON_BINARY_DIR) + "/bin/";
 constexpr int kFrames = 80;  // 0.3° apart: a 24° arc
 constexpr double kVoxelMm = 6.0;
+const std::string kViewStep = " --view-step-deg 1";  // the job option and run's flag alike
 
 std::string Sh(const std::string& cmd) {
   const auto r = RunShell(cmd);
@@ -43,8 +44,9 @@ TEST(ServicePlan, DenseArcServiceEqualsRunWithOnePlan) {
   Sh(kBin + "lfrecon -q synth --scene sphere --frames " + std::to_string(kFrames) + " --loops " +
       std::to_string(kFrames * 0.3 / 360.0) + " --width 160 --height 90 --depth-every 0 --out " + data.string());
   // lfrecon run with the poses as given (as the service), its fused maps written.
+  // The views selected >= 1° apart (kViewStep), so that every fourth view of the 0.3° arc is selected.
   Sh(kBin + "lfrecon -q run --dataset " + data.string() + " --no-refine-poses --no-refine --write-depth --voxel-mm " +
-      std::to_string(kVoxelMm) + " --out " + run_dir.string());
+      std::to_string(kVoxelMm) + kViewStep + " --out " + run_dir.string());
   const nlohmann::json report = nlohmann::json::parse(ReadFileBytes(run_dir / "report.json"));
   const int selected = report["views"]["processed"];
   EXPECT_EQ(selected, kFrames / 4);  // 0.3° apart, selected >= 1° apart: every fourth view
@@ -63,7 +65,7 @@ TEST(ServicePlan, DenseArcServiceEqualsRunWithOnePlan) {
   start("lfrecon-depth", {"--aggregate", agg, "--store", store.string()});
   start("lfrecon-propagate", {"--aggregate", agg, "--store", store.string()});
   std::string job = Sh(kBin + "lfrecon -q submit --ingest " + ing + " --dataset " + data.string() + " --voxel-mm " +
-                        std::to_string(kVoxelMm));
+                        std::to_string(kVoxelMm) + kViewStep);
   job.erase(job.find_last_not_of('\n') + 1);
   ASSERT_TRUE(JobStore::ValidJobId(job)) << job;
   const std::string st = Sh(kBin + "lfrecon status " + job + " --wait --wait-s 400 --json --aggregate " + agg);

@@ -33,6 +33,9 @@ using lfrecon::testing::Sh;
 using std::chrono::milliseconds;
 
 constexpr double kVoxelMm = 6.0;
+// The arcs below are 0.3° apart and their views selected >= 1° apart (every fourth), as run and the job
+// alike (the default step, 2°, would keep every seventh).
+const std::string kViewStep = " --view-step-deg 1";
 
 std::string LastLine(std::string s) {
   s.erase(s.find_last_not_of('\n') + 1);
@@ -79,14 +82,14 @@ TEST_F(StreamTest, StreamOfDenseArcEqualsRun) {
   const fs::path data = Synth(kFrames, 160, 90);
   const fs::path run_dir = tmp_.path() / "run";
   Sh(kBin + "lfrecon -q run --dataset " + data.string() + " --no-refine-poses --no-refine --write-depth --voxel-mm " +
-     std::to_string(kVoxelMm) + " --out " + run_dir.string());
+     std::to_string(kVoxelMm) + kViewStep + " --out " + run_dir.string());
   const nlohmann::json report = nlohmann::json::parse(ReadFileBytes(run_dir / "report.json"));
   const int selected = report["views"]["processed"];
   EXPECT_EQ(selected, kFrames / 4);  // 0.3° apart, selected >= 1° apart: every fourth view
   StartStack(1);
   const fs::path stats = tmp_.path() / "stats.json", follow = tmp_.path() / "follow.ply";
   const std::string out = Sh(kBin + "lfrecon -q stream --ingest " + ing_ + " --aggregate " + agg_ + " --dataset " +
-                             data.string() + " --voxel-mm " + std::to_string(kVoxelMm) + " --credits 4 --stats " +
+                             data.string() + " --voxel-mm " + std::to_string(kVoxelMm) + kViewStep + " --credits 4 --stats " +
                              stats.string() + " --follow " + follow.string() + " --follow-s 0.5 --wait-s 400");
   const std::string job = out.substr(0, out.find('\n'));
   ASSERT_TRUE(JobStore::ValidJobId(job)) << out;
@@ -148,7 +151,7 @@ TEST_F(StreamTest, GrowingPlanFusesWhileStreamingAndEqualsRun) {
   constexpr int kFrames = 90, kGap = 15;
   const fs::path data = Synth(kFrames, 96, 54);
   const std::string gap = " --max-frame-gap " + std::to_string(kGap);
-  const std::string voxel = " --voxel-mm " + std::to_string(kVoxelMm);
+  const std::string voxel = " --voxel-mm " + std::to_string(kVoxelMm) + kViewStep;
   const fs::path run_dir = tmp_.path() / "run";
   Sh(kBin + "lfrecon -q run --dataset " + data.string() + " --no-refine-poses --no-refine" + voxel + gap + " --out " +
      run_dir.string());
@@ -179,7 +182,7 @@ TEST_F(StreamTest, GrowingPlanFusesWhileStreamingAndEqualsRun) {
   // 1. `lfrecon stream --follow` at a camera's pace, watched from outside while it streams.
   const fs::path follow = tmp_.path() / "follow.ply";
   DaemonProcess* cli = Start("lfrecon", {"-q", "stream", "--ingest", ing_, "--aggregate", agg_, "--dataset",
-                                         data.string(), "--voxel-mm", std::to_string(kVoxelMm), "--max-frame-gap",
+                                         data.string(), "--voxel-mm", std::to_string(kVoxelMm), "--view-step-deg", "1", "--max-frame-gap",
                                          std::to_string(kGap), "--rate", "10", "--credits", "4", "--follow",
                                          follow.string(), "--follow-s", "0.3", "--wait-s", "400"});
   std::string job;
@@ -230,6 +233,7 @@ TEST_F(StreamTest, GrowingPlanFusesWhileStreamingAndEqualsRun) {
   pb::StreamOpen open = Open(v, 4);
   open.mutable_spec()->mutable_options()->set_voxel_size(kVoxelMm / 1000.0);
   open.mutable_spec()->mutable_options()->set_max_frame_gap(kGap);
+  open.mutable_spec()->mutable_options()->set_view_step_deg(1.0);
   client.Open(open, milliseconds(10000));
   const std::string job2 = client.job_id();
   constexpr int kBeforeKill = 60;

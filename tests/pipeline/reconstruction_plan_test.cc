@@ -60,7 +60,7 @@ TEST(ReconstructionPlan, DenseArcNeighboursAndGridAgainstHandCounts) {
   const std::vector<PinholeView> cams = Arc(200, 0.35);
   PipelineOptions o;
   o.depth.max_frame_gap = 0;
-  o.selection.min_step_deg = 0.5;  // the hand counts below are for a 0.5° selection (the default is 1°)
+  o.selection.min_step_deg = 0.5;  // the hand counts below are for a 0.5° selection (the default is 2°)
   const ReconstructionPlan plan = ReconstructionPlan::Compute(cams, Box(), o);
   ASSERT_EQ(plan.num_views(), 200);
   for (int k = 0; k < 200; ++k) {
@@ -100,17 +100,20 @@ TEST(ReconstructionPlan, DenseArcNeighboursAndGridAgainstHandCounts) {
 
 TEST(ReconstructionPlan, ViewSelectionCounts) {
   PipelineOptions o;
-  // 0.25° apart: every fourth view (1°, exactly the step: kept up to rounding).
-  EXPECT_EQ(ReconstructionPlan::Compute(Arc(240, 0.25), Box(), o).views.size(), 60u);
-  // 0.12° (a 3000-frame loop's spacing): every ninth (1.08°), 0.96° being short of 1°.
+  // 0.25° apart: every eighth view (2°, exactly the step: kept up to rounding).
+  EXPECT_EQ(ReconstructionPlan::Compute(Arc(240, 0.25), Box(), o).views.size(), 30u);
+  // 0.12° (a 3000-frame loop's spacing): every 17th (2.04°), 1.92° being short of 2°.
   const ReconstructionPlan p12 = ReconstructionPlan::Compute(Arc(300, 0.12), Box(), o);
-  EXPECT_EQ(p12.views.size(), 34u);
-  EXPECT_EQ(p12.views[1], 9);
-  // 0.75° (figurines): every second (1.5°); 1.5° (the demo): every view.
-  EXPECT_EQ(ReconstructionPlan::Compute(Arc(100, 0.75), Box(), o).views.size(), 50u);
-  EXPECT_EQ(ReconstructionPlan::Compute(Arc(100, 1.5), Box(), o).views.size(), 100u);
-  // 0.5° (the default before docs/benchmarks.md "Fewer views, relative vote
-  // saturation"): every fifth of the 0.12° loop (0.6°).
+  EXPECT_EQ(p12.views.size(), 18u);
+  EXPECT_EQ(p12.views[1], 17);
+  // 0.75° (figurines): every third (2.25°); 1.5° (the demo): every second (3°); 2.5°: every view.
+  EXPECT_EQ(ReconstructionPlan::Compute(Arc(100, 0.75), Box(), o).views.size(), 34u);
+  EXPECT_EQ(ReconstructionPlan::Compute(Arc(100, 1.5), Box(), o).views.size(), 50u);
+  EXPECT_EQ(ReconstructionPlan::Compute(Arc(100, 2.5), Box(), o).views.size(), 100u);
+  // 1° (the default before docs/benchmarks.md "View step 2°"): every ninth of the
+  // 0.12° loop (1.08°); 0.5° (before "Fewer views, relative vote saturation"): every fifth (0.6°).
+  o.selection.min_step_deg = 1.0;
+  EXPECT_EQ(ReconstructionPlan::Compute(Arc(300, 0.12), Box(), o).views.size(), 34u);
   o.selection.min_step_deg = 0.5;
   EXPECT_EQ(ReconstructionPlan::Compute(Arc(300, 0.12), Box(), o).views.size(), 60u);
   // A smaller step keeps more; selection off keeps all.
@@ -134,20 +137,20 @@ TEST(ReconstructionPlan, ViewSelectionCounts) {
 }
 
 // Where views are >= 0.5° apart the grid holds every view and the depth
-// neighbours are every view within 5° (0.8°: 6 per side, 12). The default 1°
-// selection keeps every second view (1.6°), and the filter's voters are the
-// selected views within 15° (9 per side, 18): no other view needs a sparse map.
+// neighbours are every view within 5° (0.8°: 6 per side, 12). The default 2°
+// selection keeps every third view (2.4°), and the filter's voters are the
+// selected views within 15° (6 per side, 12): no other view needs a sparse map.
 TEST(ReconstructionPlan, SparseSequenceUsesEveryViewWithin5Degrees) {
   const ReconstructionPlan plan = ReconstructionPlan::Compute(Arc(100, 0.8), Box(), PipelineOptions());
   for (int k = 0; k < 100; ++k) {
     EXPECT_TRUE(plan.OnGrid(k)) << k;
-    EXPECT_EQ(plan.Selected(k), k % 2 == 0) << k;
-    EXPECT_EQ(plan.NeedsSparse(k), k % 2 == 0) << k;
+    EXPECT_EQ(plan.Selected(k), k % 3 == 0) << k;
+    EXPECT_EQ(plan.NeedsSparse(k), k % 3 == 0) << k;
   }
-  EXPECT_EQ(plan.DepthNeighbours(50).size(), 12u);
-  EXPECT_EQ(plan.Voters(50).size(), 18u);
-  for (int j : plan.Voters(50)) EXPECT_EQ(j % 2, 0) << j;
-  EXPECT_EQ(plan.PhotoNeighbours(50).size(), 12u);
+  EXPECT_EQ(plan.DepthNeighbours(51).size(), 12u);
+  EXPECT_EQ(plan.Voters(51).size(), 12u);
+  for (int j : plan.Voters(51)) EXPECT_EQ(j % 3, 0) << j;
+  EXPECT_EQ(plan.PhotoNeighbours(51).size(), 12u);
 }
 
 // Growing with the stream: on a closed dense loop (0.35° apart, 1029 frames, so
@@ -256,6 +259,25 @@ TEST(ReconstructionPlan, ChromaWeightFlag) {
   f.chroma_weight = 0.25;
   EXPECT_EQ(OptionsFromFlags(f).propagation.photo.chroma_weight, 0.25);
   f.chroma_weight = 1.5;
+  EXPECT_THROW(OptionsFromFlags(f), OptionError);
+}
+
+// --view-step-deg: sets the selection's step (unset: the default); outside (0, 90) or with
+// --all-views is refused.
+TEST(ReconstructionPlan, ViewStepFlag) {
+  ReconstructionFlags f;
+  EXPECT_EQ(OptionsFromFlags(f).selection.min_step_deg, ViewSelectionOptions{}.min_step_deg);
+  f.view_step_deg = 2.0;
+  const PipelineOptions o = OptionsFromFlags(f);
+  EXPECT_EQ(o.selection.min_step_deg, 2.0);
+  // 0.75° apart (the figurines): every third view (2.25°).
+  EXPECT_EQ(ReconstructionPlan::Compute(Arc(99, 0.75), Box(), o).views.size(), 33u);
+  f.view_step_deg = 0;
+  EXPECT_THROW(OptionsFromFlags(f), OptionError);
+  f.view_step_deg = 90;
+  EXPECT_THROW(OptionsFromFlags(f), OptionError);
+  f.view_step_deg = 2.0;
+  f.all_views = true;
   EXPECT_THROW(OptionsFromFlags(f), OptionError);
 }
 
