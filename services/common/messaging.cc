@@ -2,9 +2,11 @@
 
 #include <spdlog/spdlog.h>
 
+#include <algorithm>
 #include <atomic>
 #include <csignal>
 #include <cstdlib>
+#include <limits>
 
 namespace lfrecon::svc {
 namespace {
@@ -103,7 +105,14 @@ void RequestClient::Reset() {
 }
 
 std::optional<pb::Envelope> RequestClient::RequestRaw(const std::string& bytes, std::chrono::milliseconds timeout) {
-  socket_->send(zmq::buffer(bytes), zmq::send_flags::none);
+  // A REQ socket's send blocks while it has no peer to send to (a server that refused the
+  // CURVE handshake leaves it none): bounded by the same timeout as the reply, not forever.
+  const auto send_ms = std::clamp<std::chrono::milliseconds::rep>(timeout.count(), 0, std::numeric_limits<int>::max());
+  socket_->set(zmq::sockopt::sndtimeo, static_cast<int>(send_ms));
+  if (!socket_->send(zmq::buffer(bytes), zmq::send_flags::none)) {
+    Reset();
+    return std::nullopt;
+  }
   zmq::pollitem_t items[] = {{static_cast<void*>(*socket_), 0, ZMQ_POLLIN, 0}};
   PollInterruptible(items, timeout);
   if (!(items[0].revents & ZMQ_POLLIN)) {

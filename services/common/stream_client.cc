@@ -1,6 +1,7 @@
 #include "common/stream_client.h"
 
 #include <algorithm>
+#include <limits>
 
 namespace lfrecon::svc {
 
@@ -13,11 +14,18 @@ StreamClient::StreamClient(zmq::context_t& context, const std::string& endpoint,
   socket_.connect(endpoint);
 }
 
-void StreamClient::Send(const pb::Envelope& env) {
+void StreamClient::Send(const pb::Envelope& env, std::chrono::milliseconds timeout) {
+  // A DEALER's send blocks while it has no peer to send to (an ingest daemon that refused the
+  // CURVE handshake leaves it none): bounded by the caller's timeout, not forever.
+  socket_.set(zmq::sockopt::sndtimeo,
+              static_cast<int>(std::clamp<long long>(timeout.count(), 0, std::numeric_limits<int>::max())));
   // As a REQ socket frames it: an empty delimiter, then the envelope (the daemon's ROUTER echoes the route).
-  socket_.send(zmq::message_t(), zmq::send_flags::sndmore);
+  if (!socket_.send(zmq::message_t(), zmq::send_flags::sndmore))
+    throw ServiceError(pb::ERROR_UNKNOWN, "could not send to " + endpoint_ + " within " +
+                                              std::to_string(timeout.count()) +
+                                              " ms (is lfrecon-ingest running, and does it accept this key?)");
   const std::string bytes = Serialize(env);
-  socket_.send(zmq::buffer(bytes), zmq::send_flags::none);
+  socket_.send(zmq::buffer(bytes), zmq::send_flags::none);  // the rest of a message never blocks
 }
 
 std::optional<pb::Envelope> StreamClient::Receive(std::chrono::milliseconds timeout) {
@@ -58,7 +66,7 @@ pb::Envelope StreamClient::ReceiveOrThrow(std::chrono::milliseconds timeout) {
 pb::StreamOpened StreamClient::Open(const pb::StreamOpen& open, std::chrono::milliseconds timeout) {
   pb::Envelope env = NewEnvelope();
   *env.mutable_stream_open() = open;
-  Send(env);
+  Send(env, timeout);
   const pb::Envelope reply = ReceiveOrThrow(timeout);
   if (reply.has_error()) throw ServiceError(reply.error().code(), reply.error().message());
   if (!reply.has_stream_opened()) throw ServiceError(pb::ERROR_MALFORMED, "StreamOpen answered with " + BodyName(reply));
@@ -81,7 +89,7 @@ void StreamClient::Push(const pb::Frame& frame, std::chrono::milliseconds timeou
   while (in_flight_ >= credits_) Take(ReceiveOrThrow(timeout));
   pb::Envelope env = NewEnvelope(job_);
   *env.mutable_stream_frame()->mutable_frame() = frame;
-  Send(env);
+  Send(env, timeout);
   ++in_flight_;
   max_in_flight_ = std::max(max_in_flight_, in_flight_);
   // Answers already there are taken now, so errors surface early.
@@ -95,7 +103,7 @@ void StreamClient::Push(const pb::Frame& frame, std::chrono::milliseconds timeou
 pb::StreamEnded StreamClient::End(std::uint32_t num_frames, std::chrono::milliseconds timeout) {
   pb::Envelope env = NewEnvelope(job_);
   env.mutable_stream_end()->set_num_frames(num_frames);
-  Send(env);
+  Send(env, timeout);
   for (;;) {
     const pb::Envelope reply = ReceiveOrThrow(timeout);
     if (reply.has_stream_ended()) {
@@ -110,9 +118,9 @@ pb::StreamEnded StreamClient::End(std::uint32_t num_frames, std::chrono::millise
   }
 }
 
-void StreamClient::SendUnchecked(pb::Envelope env) {
+void StreamClient::SendUnchecked(pb::Envelope env, std::chrono::milliseconds timeout) {
   if (env.job_id().empty()) env.set_job_id(job_);
-  Send(env);
+  Send(env, timeout);
 }
 
 }  // namespace lfrecon::svc

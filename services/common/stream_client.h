@@ -38,11 +38,12 @@ class StreamClient {
   int max_in_flight_ingest() const { return max_in_flight_ingest_; }  // as the ingest daemon counted them
 
   // Tests: send an envelope (this job's id set) without looking at the credits, and take one answer.
-  void SendUnchecked(pb::Envelope env);
+  void SendUnchecked(pb::Envelope env, std::chrono::milliseconds timeout = std::chrono::milliseconds(10000));
   std::optional<pb::Envelope> Receive(std::chrono::milliseconds timeout);
 
  private:
-  void Send(const pb::Envelope& env);
+  // Throws ServiceError when the message cannot be handed to the socket within `timeout`.
+  void Send(const pb::Envelope& env, std::chrono::milliseconds timeout);
   // One answer to a frame: a credit back; throws ServiceError for an error answer.
   void Take(const pb::Envelope& env);
   pb::Envelope ReceiveOrThrow(std::chrono::milliseconds timeout);

@@ -10,12 +10,14 @@
 #include <gtest/gtest.h>
 
 #include <chrono>
+#include <future>
 #include <memory>
 #include <thread>
 
 #include "common/auth.h"
 #include "common/job_store.h"
 #include "common/messaging.h"
+#include "common/stream_client.h"
 #include "common/test_util.h"
 #include "daemon_process.h"
 #include "eval/mesh_metrics.h"
@@ -251,6 +253,36 @@ TEST_F(AuthTest, ClientWithoutKeyCannotConnect) {
   // A client key with the wrong server key (the ingest's for the aggregator): the handshake fails.
   auto wrong = Client(agg_, "client", "ingest");
   EXPECT_FALSE(wrong->Request(Ping(), milliseconds(1000)).has_value());
+  // A request sent once the refused handshake has torn the connection down: the REQ socket
+  // then has no peer to send to, and the send is bounded by the timeout too (it used to block
+  // forever; integration_auth_test once hung on it).
+  auto refused = Client(agg_, "outsider");
+  std::this_thread::sleep_for(milliseconds(1500));
+  auto done = std::make_shared<std::promise<bool>>();
+  auto answered = done->get_future();
+  std::thread([done, c = std::shared_ptr<RequestClient>(std::move(refused))] {
+    done->set_value(c->Request(Ping(), milliseconds(500)).has_value());
+  }).detach();
+  ASSERT_EQ(answered.wait_for(std::chrono::seconds(20)), std::future_status::ready) << "the request blocked";
+  EXPECT_FALSE(answered.get());
+  // The same for a stream (a DEALER socket): opening it fails with an error naming the endpoint.
+  ClientSecurity outsider;
+  outsider.key = ReadSecretKeyFile(keys_.Key("outsider"));
+  outsider.server_key = ReadPublicKeyFile(keys_.Pub("ingest"));
+  auto stream = std::make_shared<StreamClient>(context_, ing_, kDefaultMaxMessageBytes, outsider);
+  std::this_thread::sleep_for(milliseconds(1500));
+  auto opened = std::make_shared<std::promise<std::string>>();
+  auto open_error = opened->get_future();
+  std::thread([opened, stream] {
+    try {
+      stream->Open(pb::StreamOpen(), milliseconds(500));
+      opened->set_value("");
+    } catch (const ServiceError& e) {
+      opened->set_value(e.what());
+    }
+  }).detach();
+  ASSERT_EQ(open_error.wait_for(std::chrono::seconds(20)), std::future_status::ready) << "the stream's open blocked";
+  EXPECT_NE(open_error.get().find(ing_), std::string::npos);
   EXPECT_TRUE(NoJobs(store_));  // nothing was submitted
   for (auto& p : procs_) EXPECT_TRUE(p->Running()) << p->log();
 }
