@@ -88,6 +88,11 @@ void ConfigureSocket(zmq::socket_t& socket, std::int64_t max_message_bytes) {
   socket.set(zmq::sockopt::maxmsgsize, TransportLimit(max_message_bytes));
 }
 
+void SetSendTimeout(zmq::socket_t& socket, std::chrono::milliseconds timeout) {
+  socket.set(zmq::sockopt::sndtimeo,
+             static_cast<int>(std::clamp<std::chrono::milliseconds::rep>(timeout.count(), 0, std::numeric_limits<int>::max())));
+}
+
 RequestClient::RequestClient(zmq::context_t& context, std::string endpoint, std::int64_t max_message_bytes,
                              ClientSecurity security)
     : context_(context), endpoint_(std::move(endpoint)), max_message_bytes_(max_message_bytes),
@@ -105,10 +110,7 @@ void RequestClient::Reset() {
 }
 
 std::optional<pb::Envelope> RequestClient::RequestRaw(const std::string& bytes, std::chrono::milliseconds timeout) {
-  // A REQ socket's send blocks while it has no peer to send to (a server that refused the
-  // CURVE handshake leaves it none): bounded by the same timeout as the reply, not forever.
-  const auto send_ms = std::clamp<std::chrono::milliseconds::rep>(timeout.count(), 0, std::numeric_limits<int>::max());
-  socket_->set(zmq::sockopt::sndtimeo, static_cast<int>(send_ms));
+  SetSendTimeout(*socket_, timeout);  // the same bound as the reply's, not forever
   if (!socket_->send(zmq::buffer(bytes), zmq::send_flags::none)) {
     Reset();
     return std::nullopt;

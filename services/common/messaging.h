@@ -64,6 +64,9 @@ std::string BodyName(const pb::Envelope& env);
 
 // Linger 0 and the transport size limit.
 void ConfigureSocket(zmq::socket_t& socket, std::int64_t max_message_bytes);
+// Bounds the socket's blocking sends by `timeout`: a REQ or DEALER socket's send blocks while it
+// has no peer to send to (a server that refused the CURVE handshake leaves it none).
+void SetSendTimeout(zmq::socket_t& socket, std::chrono::milliseconds timeout);
 
 // A REQ client with timeouts and reconnect ("lazy pirate").
 class RequestClient {

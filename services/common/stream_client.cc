@@ -1,7 +1,6 @@
 #include "common/stream_client.h"
 
 #include <algorithm>
-#include <limits>
 
 namespace lfrecon::svc {
 
@@ -15,10 +14,7 @@ StreamClient::StreamClient(zmq::context_t& context, const std::string& endpoint,
 }
 
 void StreamClient::Send(const pb::Envelope& env, std::chrono::milliseconds timeout) {
-  // A DEALER's send blocks while it has no peer to send to (an ingest daemon that refused the
-  // CURVE handshake leaves it none): bounded by the caller's timeout, not forever.
-  socket_.set(zmq::sockopt::sndtimeo,
-              static_cast<int>(std::clamp<long long>(timeout.count(), 0, std::numeric_limits<int>::max())));
+  SetSendTimeout(socket_, timeout);
   // As a REQ socket frames it: an empty delimiter, then the envelope (the daemon's ROUTER echoes the route).
   if (!socket_.send(zmq::message_t(), zmq::send_flags::sndmore))
     throw ServiceError(pb::ERROR_UNKNOWN, "could not send to " + endpoint_ + " within " +

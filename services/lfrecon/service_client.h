@@ -4,6 +4,7 @@
 // requests with the CLI's errors, waiting for a job, and the job option flags
 // (mapped to the pipeline's options by OptionsFromFlags, through JobOptions).
 #include <CLI/CLI.hpp>
+#include <optional>
 #include <string>
 
 #include "common/job_store.h"
@@ -54,7 +55,7 @@ struct JobOptionFlags {
   bool no_densify = false, all_views = false, no_mask_free_space = false, mask_carving = false;
   int color_views = 8;
   int max_frame_gap = -1;  // -1: unset (the default)
-  double view_step_deg = -1;  // -1: unset (the default)
+  std::optional<double> view_step_deg;  // unset: the default
   void AddTo(CLI::App* cmd);
   // Checked as the ingest daemon and `lfrecon run` check them (OptionError: exit 2).
   pb::JobOptions ToProto() const;

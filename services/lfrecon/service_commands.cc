@@ -143,7 +143,7 @@ pb::JobOptions JobOptionFlags::ToProto() const {
   o.set_color_views(color_views);
   o.set_all_views(all_views);
   if (max_frame_gap != -1) o.set_max_frame_gap(max_frame_gap);
-  if (view_step_deg != -1) o.set_view_step_deg(view_step_deg);
+  if (view_step_deg) o.set_view_step_deg(*view_step_deg);
   o.set_no_mask_free_space(no_mask_free_space);
   o.set_mask_carving(mask_carving);
   svc::JobPipelineOptions(o);  // every job option checked here, as lfrecon run does (exit 2)
