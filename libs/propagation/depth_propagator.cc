@@ -40,6 +40,7 @@ PropagationOptions PaperPropagationOptions() {
   o.silhouette_pixels_splat_only = false;
   o.blocked_silhouettes_keep_depth = false;
   o.keep_edge_depths = false;
+  o.keep_contested_foreground = false;
   o.filter_inverse_depth = false;
   o.consistency.views = 0;
   o.photo.centre_consistency = false;
@@ -282,6 +283,8 @@ DepthMap DepthPropagator::Filter(const cv::Mat& image, const SplatMaps& splats) 
   // Ridge on the slopes of the affine fit, in (u, v) units (see the options).
   const float ridge = static_cast<float>(std::pow(o.affine_ridge_px / scale, 2));
   const bool extrap_on = affine && o.extrapolation_m0 > 0;
+  const bool keep_contested = o.keep_contested_foreground;
+  const float contested_ratio = static_cast<float>(o.photo.silhouette_ratio);
   const bool has_thin = splats.thin_confidence.size() == splats.edge_depth.size() &&
                         splats.thin_confidence.type() == CV_32F;
   const double floor2 = std::pow(o.extrapolation_floor_px / scale, 2);
@@ -330,10 +333,16 @@ DepthMap DepthPropagator::Filter(const cv::Mat& image, const SplatMaps& splats) 
             cfg *= static_cast<float>(std::exp(-0.5 * excess * excess));
           }
         }
-        const bool fg = cfg >= cbg;  // the side with the larger filtered confidence
-        const float cw = fg ? cfg : cbg;
-        if (!(cw > min_conf)) continue;
+        bool fg = cfg >= cbg;  // the side with the larger filtered confidence
         const std::uint8_t own = splats.edge_label.at<std::uint8_t>(r, c);
+        // A foreground edge pixel that the background wins only narrowly (not
+        // by the silhouette ratio) keeps its own depth and side, with full
+        // confidence, even where both sides reached it only faintly
+        // (PropagationOptions::keep_contested_foreground).
+        const bool contested = keep_contested && own == kFg && !fg && cbg - cfg <= contested_ratio * (cbg + cfg);
+        if (contested) fg = true;
+        const float cw = fg ? cfg : cbg;
+        if (!(cw > min_conf) && !contested) continue;
         double d;
         if (o.keep_edge_depths && own == (fg ? kFg : kBg)) {
           d = splats.edge_depth.at<float>(r, c);
@@ -354,7 +363,7 @@ DepthMap DepthPropagator::Filter(const cv::Mat& image, const SplatMaps& splats) 
         }
         if (!(d > 0) || !std::isfinite(d)) continue;
         depth[c] = static_cast<float>(d);
-        conf[c] = std::abs(cfg - cbg);  // |C'_fg − C'_bg| (§4.2)
+        conf[c] = contested ? 1.0f : std::abs(cfg - cbg);  // |C'_fg − C'_bg| (§4.2), contested: see above
         label[c] = fg ? kFg : kBg;
       }
     }

@@ -449,6 +449,60 @@ TEST(DepthPropagator, ExtrapolationBeyondTheSupportLosesConfidenceAndLinesKeepTh
   EXPECT_THROW(bad.Check(), OptionError);
 }
 
+TEST(DepthPropagator, ContestedForegroundEdgesKeepTheirDepthClearLossesDoNot) {
+  // A textured background: background support every 3 px. Column 80 is a
+  // part one pixel wide: foreground edge pixels (depth 0.9) whose own splats
+  // the propagation dropped (silhouette pixels feed the filter nothing), with
+  // foreground support beside them in column 81 whose confidence grows from
+  // 0 (row 0) to 0.8 (last row), so the background wins row 0 clearly, the
+  // last rows not at all, and some rows between narrowly. Column 40: a
+  // foreground edge pixel with no support at all (a clear loss).
+  const int rows = 60, cols = 160;
+  cv::Mat image(rows, cols, CV_32FC3, cv::Scalar(0.4, 0.4, 0.4));
+  image.colRange(80, 82).setTo(cv::Scalar(0.6, 0.6, 0.6));  // the part's own colour
+  SplatMaps s = SplatMaps::Zeros(rows, cols);
+  for (int r = 0; r < rows; ++r) {
+    for (int c = 1; c < cols; c += 3) {
+      if (c == 40 || c == 79 || c == 82) continue;
+      s.depth_bg.at<float>(r, c) = 3.0f;
+      s.confidence_bg.at<float>(r, c) = 0.8f;
+    }
+    for (int c : {40, 80}) {
+      s.edge_label.at<std::uint8_t>(r, c) = kFg;
+      s.edge_depth.at<float>(r, c) = 0.9f;
+    }
+    s.depth_fg.at<float>(r, 81) = 0.9f;
+    s.confidence_fg.at<float>(r, 81) = 0.8f * r / (rows - 1);
+  }
+  PropagationOptions off;
+  off.keep_contested_foreground = false;
+  const DepthMap a = DepthPropagator(off).Filter(image, s), b = DepthPropagator(PropagationOptions()).Filter(image, s);
+  int kept = 0;
+  for (int r = 0; r < rows; ++r) {
+    for (int c = 0; c < cols; ++c) {
+      if (c == 80 && a.label.at<std::uint8_t>(r, c) == kBg && b.label.at<std::uint8_t>(r, c) == kFg) {
+        EXPECT_FLOAT_EQ(b.depth.at<float>(r, c), 0.9f) << r;  // its own depth, full confidence
+        EXPECT_FLOAT_EQ(b.confidence.at<float>(r, c), 1.0f) << r;
+        ++kept;
+        continue;
+      }
+      // Everything else as without the rule.
+      ASSERT_EQ(b.label.at<std::uint8_t>(r, c), a.label.at<std::uint8_t>(r, c)) << r << "," << c;
+      ASSERT_FLOAT_EQ(b.depth.at<float>(r, c), a.depth.at<float>(r, c)) << r << "," << c;
+    }
+  }
+  std::printf("column 80: %d of %d rows kept their own foreground depth\n", kept, rows);
+  EXPECT_GE(kept, 3);
+  EXPECT_LT(kept, rows / 2);
+  // Clear losses stay background: the unsupported column, and the rod where its support is weakest.
+  for (int r = 0; r < rows; ++r) EXPECT_EQ(b.label.at<std::uint8_t>(r, 40), kBg) << r;
+  EXPECT_EQ(b.label.at<std::uint8_t>(0, 80), kBg);
+  EXPECT_EQ(b.label.at<std::uint8_t>(rows - 1, 80), kFg);  // won outright, with or without the rule
+  EXPECT_EQ(a.label.at<std::uint8_t>(rows - 1, 80), kFg);
+  // The paper's reading has it off.
+  EXPECT_FALSE(PaperPropagationOptions().keep_contested_foreground);
+}
+
 TEST(DepthPropagator, EdgeCasesGiveDefinedOutput) {
   const SynthViews v = testing::MakeSynthViews("sphere", 0, 2.0, 160, 90, 480);
   const auto expect_empty = [](const DepthMap& m, int rows, int cols) {
