@@ -131,14 +131,14 @@ struct PropagationOptions {
   // (photo.silhouette_ratio, Fig. 4: C'_bg − C'_fg <= 0.3 (C'_bg + C'_fg)),
   // keeps its own depth and side (ours; false: the larger side always wins,
   // as §4.2). A part one or two pixels wide over a textured background: its
-  // silhouette edge pixels feed the filter nothing, its own colour keeps the
-  // edge-aware filter's support from reaching it from either side, and the
-  // background's slightly larger leak won, so the fusion carved the part
-  // from that view (320x180 tabletop: the thin parts' depths within 5 mm,
-  // filtered 0.413 -> dense 0.322 of their visible samples, thin_stage_bench).
-  // Such a pixel gets confidence 1: at the dense maps' σ_s (0.15) any c above
-  // ~0.05 is a full vote; with the depth stage's own confidence instead
-  // (mostly lower on such parts) the tabletop's thin recall rose half as much.
+  // silhouette edge pixels feed the filter nothing, so both sides reach it
+  // only faintly through the edge-aware filter, the background's slightly
+  // larger share won, and the fusion carved the part from that view
+  // (320x180 tabletop: the thin parts' depths within 5 mm, filtered 0.413 ->
+  // dense 0.322 of their visible samples, thin_stage_bench). Such a pixel
+  // gets confidence 1: at the dense maps' σ_s (0.15) any c above ~0.05 is a
+  // full vote; with the depth stage's own confidence instead (mostly lower on
+  // such parts) the tabletops' thin recall rose a third as much.
   // Quality table (docs/benchmarks.md, "Contested foreground edges"), thin
   // recall@5: tabletop 0.464 -> 0.526, tabletop-degraded 0.314 -> 0.479;
   // thin-degraded F@2 0.789 -> 0.880; no set's F@5 lower.
