@@ -36,6 +36,7 @@
 #include <vector>
 
 #include "eval/mesh_metrics.h"
+#include "grid_components.h"
 #include "fusion/free_space.h"
 #include "fusion/probabilistic_fusion.h"
 #include "fusion/surface_evidence.h"
@@ -150,49 +151,22 @@ struct Cluster {
 
 // Connected components (26-neighbourhood) of points on a grid of `cell`.
 std::vector<Cluster> ClusterPoints(const std::vector<Eigen::Vector3d>& pts, const std::vector<double>& sd, double cell) {
-  std::unordered_map<std::uint64_t, std::vector<int>> grid;
-  const auto key = [](const Eigen::Vector3i& c) {
-    const auto u = [](int v) { return static_cast<std::uint64_t>(v + (1 << 20)) & 0x1FFFFFull; };
-    return u(c.x()) | (u(c.y()) << 21) | (u(c.z()) << 42);
-  };
-  const auto cellof = [&](const Eigen::Vector3d& p) -> Eigen::Vector3i { return (p / cell).array().floor().cast<int>(); };
-  for (std::size_t i = 0; i < pts.size(); ++i) grid[key(cellof(pts[i]))].push_back(static_cast<int>(i));
-  std::unordered_map<std::uint64_t, int> label;
-  std::vector<Cluster> out;
-  for (const auto& [k0, ids0] : grid) {
-    if (label.count(k0)) continue;
-    const int id = static_cast<int>(out.size());
-    out.emplace_back();
-    std::vector<Eigen::Vector3i> stack = {cellof(pts[ids0[0]])};
-    label[k0] = id;
-    while (!stack.empty()) {
-      const Eigen::Vector3i c = stack.back();
-      stack.pop_back();
-      for (int i : grid.at(key(c))) {
-        Cluster& cl = out[id];
-        ++cl.n;
-        cl.sum += pts[i];
-        cl.lo = cl.lo.cwiseMin(pts[i]);
-        cl.hi = cl.hi.cwiseMax(pts[i]);
-        cl.dist += std::isfinite(sd[i]) ? std::abs(sd[i]) : 0.05;
-        if (sd[i] > 0) ++cl.outside;
-      }
-      for (int dx = -1; dx <= 1; ++dx)
-        for (int dy = -1; dy <= 1; ++dy)
-          for (int dz = -1; dz <= 1; ++dz) {
-            const Eigen::Vector3i n = c + Eigen::Vector3i(dx, dy, dz);
-            const std::uint64_t kn = key(n);
-            if (!grid.count(kn) || label.count(kn)) continue;
-            label[kn] = id;
-            stack.push_back(n);
-          }
-    }
+  int count = 0;
+  const std::vector<int> label = bench::GridComponents(pts, cell, &count);
+  std::vector<Cluster> out(count);
+  for (std::size_t i = 0; i < pts.size(); ++i) {
+    Cluster& cl = out[label[i]];
+    ++cl.n;
+    cl.sum += pts[i];
+    cl.lo = cl.lo.cwiseMin(pts[i]);
+    cl.hi = cl.hi.cwiseMax(pts[i]);
+    cl.dist += std::isfinite(sd[i]) ? std::abs(sd[i]) : 0.05;
+    if (sd[i] > 0) ++cl.outside;
   }
-  for (const auto& [k, ids] : grid) {
-    Cluster& c = out[label.at(k)];
+  for (std::size_t i = 0; i < pts.size(); ++i) {
+    Cluster& c = out[label[i]];
     const Eigen::Vector3d m = c.sum / c.n;
-    for (int i : ids)
-      if (c.rep.isZero() || (pts[i] - m).norm() < (c.rep - m).norm()) c.rep = pts[i];
+    if (c.rep.isZero() || (pts[i] - m).norm() < (c.rep - m).norm()) c.rep = pts[i];
   }
   std::sort(out.begin(), out.end(), [](const Cluster& a, const Cluster& b) { return a.n > b.n; });
   return out;

@@ -6,8 +6,8 @@
 // (gt_thin.ply, sampled every 1 mm) is projected into the view; a sample the ground-truth depth
 // sees unoccluded is *covered* by a stage when a pixel within R px (default 1) of its
 // projection has a depth within T mm (default 5) of the sample's. Prints, per stage, the share
-// of visible thin samples covered, overall and per thin part (connected clusters of samples,
-// largest first), so a part missing from the mesh can be traced to the stage that lost it.
+// of visible thin samples covered, overall and per thin part (connected components of samples
+// on a 4 mm grid, largest first), so a part missing from the mesh can be traced to the stage that lost it.
 #include <Eigen/Core>
 #include <opencv2/core.hpp>
 
@@ -16,58 +16,17 @@
 #include <cstdio>
 #include <cstring>
 #include <filesystem>
-#include <map>
 #include <string>
-#include <unordered_map>
 #include <vector>
 
 #include "eval/mesh_metrics.h"
+#include "grid_components.h"
 #include "io/dataset.h"
 #include "io/depth_map_io.h"
 #include "io/ply.h"
 
 using namespace lfrecon;
 namespace fs = std::filesystem;
-
-namespace {
-
-// Connected clusters of points linked within `link` metres (hash grid of that cell size).
-std::vector<int> Clusters(const std::vector<Eigen::Vector3d>& pts, double link, int* count) {
-  auto key = [&](long long i, long long j, long long k) { return (i * 73856093LL) ^ (j * 19349663LL) ^ (k * 83492791LL); };
-  std::unordered_map<long long, std::vector<int>> grid;
-  std::vector<Eigen::Vector3i> cell(pts.size());
-  for (size_t n = 0; n < pts.size(); ++n) {
-    cell[n] = (pts[n] / link).array().floor().cast<int>();
-    grid[key(cell[n].x(), cell[n].y(), cell[n].z())].push_back(static_cast<int>(n));
-  }
-  std::vector<int> label(pts.size(), -1);
-  int next = 0;
-  for (size_t s = 0; s < pts.size(); ++s) {
-    if (label[s] >= 0) continue;
-    std::vector<int> stack = {static_cast<int>(s)};
-    label[s] = next;
-    while (!stack.empty()) {
-      const int a = stack.back();
-      stack.pop_back();
-      for (int dx = -1; dx <= 1; ++dx)
-        for (int dy = -1; dy <= 1; ++dy)
-          for (int dz = -1; dz <= 1; ++dz) {
-            auto it = grid.find(key(cell[a].x() + dx, cell[a].y() + dy, cell[a].z() + dz));
-            if (it == grid.end()) continue;
-            for (int b : it->second)
-              if (label[b] < 0 && (pts[a] - pts[b]).norm() <= link) {
-                label[b] = next;
-                stack.push_back(b);
-              }
-          }
-    }
-    ++next;
-  }
-  *count = next;
-  return label;
-}
-
-}  // namespace
 
 int main(int argc, char** argv) {
   if (argc < 3) {
@@ -103,8 +62,9 @@ int main(int argc, char** argv) {
     return 2;
   }
   const std::vector<Eigen::Vector3d> pts = SampleSurface(ReadPly(*thin_path), 0.001, 1);
+  const ObservationOptions observation;
   int num_clusters = 0;
-  const std::vector<int> cluster = Clusters(pts, 0.004, &num_clusters);
+  const std::vector<int> cluster = bench::GridComponents(pts, 0.004, &num_clusters);
   // visible[c], covered[s][c]: sample-view pairs per cluster.
   std::vector<long long> visible(num_clusters, 0);
   std::vector<std::vector<long long>> covered(stages.size(), std::vector<long long>(num_clusters, 0));
@@ -129,8 +89,10 @@ int main(int argc, char** argv) {
       const double z = view.Project(pts[n], &px);
       if (z <= 0 || !view.InImage(px)) continue;
       const int x = static_cast<int>(px.x()), y = static_cast<int>(px.y());
-      const float g = gt.at<float>(y, x);
-      if (!(std::abs(g - z) <= 0.002 + 0.0025 * z)) continue;  // occluded (ObservationOptions' rule)
+      // Visible: the ground-truth depth at its pixel is its own, within the
+      // observation mask's tolerance (ObservationOptions: max(2 mm, 0.25 %)).
+      if (!(std::abs(gt.at<float>(y, x) - z) <= std::max(observation.tolerance, observation.relative_tolerance * z)))
+        continue;
       ++visible[cluster[n]];
       for (size_t s = 0; s < maps.size(); ++s) {
         bool hit = false, any = false, behind = false;
