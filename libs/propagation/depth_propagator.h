@@ -134,8 +134,8 @@ struct PropagationOptions {
   // silhouette edge pixels feed the filter nothing, so both sides reach it
   // only faintly through the edge-aware filter, the background's slightly
   // larger share won, and the fusion carved the part from that view
-  // (320x180 tabletop: the thin parts' depths within 5 mm, filtered 0.413 ->
-  // dense 0.322 of their visible samples, thin_stage_bench). Such a pixel
+  // (320x180 tabletop: the thin parts' depths within 5 mm, filtered 0.415 ->
+  // dense 0.325 of their visible samples, thin_stage_bench). Such a pixel
   // gets confidence 1: at the dense maps' σ_s (0.15) any c above ~0.05 is a
   // full vote; with the depth stage's own confidence instead (mostly lower on
   // such parts) the tabletops' thin recall rose a third as much.
