@@ -8,11 +8,13 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <deque>
 #include <fstream>
 #include <map>
 #include <set>
 
 #include "fusion/free_space.h"
+#include "fusion/geometric_consistency.h"
 #include "fusion/mesh_render.h"
 #include "pipeline/finish_surface.h"
 #include "pipeline/reconstruction_plan.h"
@@ -215,12 +217,76 @@ PipelineResult EmbeddedPipeline::Run(FrameSource& frames) {
 
   const DepthPropagator propagator(options_.propagation);
   int done = 0;
+  // Fusion of one view's dense map (after the geometric consistency check when on).
+  auto fuse = [&](int i, const DepthMap& fused_map, const DepthMap& sparse) {
+    st.fused_pixels += fused_map.CountValid();
+    Timer t;
+    // Free space added before fusion; each step returns the map as it is when it is off.
+    DepthMap input = WithBackgroundFloor(fused_map, sparse, views_[i], volume_, options_);
+    const PipelineOptions::MaskFreeSpace& mf = options_.mask_free_space;
+    const cv::Mat mask = mask_of_view_ && mf.confidence > 0 ? mask_of_view_(i) : cv::Mat();
+    if (!mask.empty()) {
+      if (mask.size() != fused_map.depth.size())
+        throw InputError("mask of view " + std::to_string(i), std::to_string(mask.cols) + "x" +
+                         std::to_string(mask.rows) + ", its frame " + std::to_string(fused_map.depth.cols) + "x" +
+                         std::to_string(fused_map.depth.rows));
+      input = WithMaskFreeSpace(input, mask, mf.confidence, mf.margin_px);
+      ++st.masked_views;
+    }
+    fusion.Integrate(views_[i], input, i);
+    st.seconds_fusion += t.Seconds();
+    st.cpu_fusion += t.CpuSeconds();
+    if (write && options_.write_depth) {
+      const std::string stem = stem_of(i);
+      WritePfm(options_.out_dir / "depth" / (stem + ".pfm"), fused_map.depth);
+      WritePfm(options_.out_dir / "confidence" / (stem + ".pfm"), fused_map.confidence);
+    }
+    ++done;
+    if (view_callback_) view_callback_(i, done, static_cast<int>(wanted.size()));
+  };
+  // Multi-view geometric consistency (GeometricConsistencyOptions): each dense
+  // map waits until the `delay` processed views after it are densified, then
+  // is checked against the unchecked maps at its offsets and fused.
+  const GeometricConsistencyOptions& gc = options_.geometric_consistency;
+  const int delay = options_.densify ? gc.Delay() : 0;
+  struct PendingView {
+    int view, position;
+    DepthMap dense;
+    PackedDepthMap sparse;  // for the background floor's gate
+    cv::Mat own;
+  };
+  std::deque<PendingView> pending;
+  std::deque<std::pair<int, cv::Mat>> recent;  // (view, unchecked dense depth) from processed position recent_base on
+  int processed = 0, recent_base = 0;
+  auto check_and_fuse = [&]() {
+    PendingView pv = std::move(pending.front());
+    pending.pop_front();
+    std::vector<NeighbourDepth> nbs;
+    for (int o : gc.offsets)
+      for (int sign : {-1, 1}) {
+        const int q = pv.position + sign * o - recent_base;
+        if (q < 0 || q >= static_cast<int>(recent.size())) continue;
+        nbs.push_back({&views_[recent[q].first], &recent[q].second});
+      }
+    Timer t;
+    const GeometricConsistencyStats gs = ApplyGeometricConsistency(views_[pv.view], pv.own, nbs, volume_, gc, &pv.dense);
+    st.geometric_checked += gs.foreground - gs.own;
+    st.geometric_dropped += gs.dropped;
+    st.seconds_fusion += t.Seconds();
+    st.cpu_fusion += t.CpuSeconds();
+    fuse(pv.view, pv.dense, pv.sparse.Unpack());
+    // Maps no pending view will look back at any more.
+    const int oldest = pending.empty() ? processed : pending.front().position;
+    while (!recent.empty() && recent_base < oldest - delay) recent.pop_front(), ++recent_base;
+  };
+
   const StreamingDepthStats ds = depth.Run(
       frames, plan.depth, [&](int i, const cv::Mat& image, const DepthMap& sparse, const DepthMap& filtered) {
         const DepthMap& base = options_.depth.run_filter ? filtered : sparse;
         st.sparse_pixels += sparse.CountValid();
         st.filtered_pixels += filtered.CountValid();
         DepthMap fused_map;
+        cv::Mat own;  // geometric consistency: where the dense depth is the view's own filtered depth
         const bool preview = preview_ids.count(i) > 0;
         if (options_.densify) {
           Timer t;
@@ -247,6 +313,7 @@ PipelineResult EmbeddedPipeline::Run(FrameSource& frames) {
                                                   preview ? &edge_classes : nullptr);
           st.seconds_densify += t.Seconds();
           st.cpu_densify += t.CpuSeconds();
+          if (delay > 0) own = OwnDepthMask(fused_map, base, gc.own_tolerance);
           if (preview && !edge_classes.empty())
             WriteEdgePreview(options_.out_dir / "edges" / (stem_of(i) + ".png"), reference.image, edge_classes);
           for (int j : plan.PhotoNeighbours(i))
@@ -256,33 +323,19 @@ PipelineResult EmbeddedPipeline::Run(FrameSource& frames) {
           // TODO(propagation): without densification the filtered sparse maps are fused as they are.
           fused_map = base;
         }
-        st.fused_pixels += fused_map.CountValid();
-        Timer t;
-        // Free space added before fusion; each step returns the map as it is when it is off.
-        DepthMap input = WithBackgroundFloor(fused_map, sparse, views_[i], volume_, options_);
-        const PipelineOptions::MaskFreeSpace& mf = options_.mask_free_space;
-        const cv::Mat mask = mask_of_view_ && mf.confidence > 0 ? mask_of_view_(i) : cv::Mat();
-        if (!mask.empty()) {
-          if (mask.size() != fused_map.depth.size())
-            throw InputError("mask of view " + std::to_string(i), std::to_string(mask.cols) + "x" +
-                             std::to_string(mask.rows) + ", its frame " + std::to_string(fused_map.depth.cols) + "x" +
-                             std::to_string(fused_map.depth.rows));
-          input = WithMaskFreeSpace(input, mask, mf.confidence, mf.margin_px);
-          ++st.masked_views;
-        }
-        fusion.Integrate(views_[i], input, i);
-        st.seconds_fusion += t.Seconds();
-        st.cpu_fusion += t.CpuSeconds();
-        if (write && options_.write_depth) {
-          const std::string stem = stem_of(i);
-          WritePfm(options_.out_dir / "depth" / (stem + ".pfm"), fused_map.depth);
-          WritePfm(options_.out_dir / "confidence" / (stem + ".pfm"), fused_map.confidence);
-        }
         if (preview && fused_map.CountValid() > 0)
           WriteDepthPreview(options_.out_dir / "preview" / (stem_of(i) + ".png"), fused_map.depth, image);
-        ++done;
-        if (view_callback_) view_callback_(i, done, static_cast<int>(wanted.size()));
+        if (delay == 0) {
+          fuse(i, fused_map, sparse);
+          return;
+        }
+        // Geometric consistency: the map waits for the `delay` maps after it.
+        recent.push_back({i, fused_map.depth.clone()});
+        pending.push_back({i, processed++, std::move(fused_map), PackedDepthMap::Pack(sparse), std::move(own)});
+        while (!pending.empty() && pending.front().position + delay < processed) check_and_fuse();
       });
+  while (!pending.empty()) check_and_fuse();  // the last views, with the neighbours before them
+  recent.clear();
   window.clear();
   // The carving frames' object masks (CarvingOptions::carve_outside_masks).
   const bool mask_carving = mask_of_view_ && CarvesOutsideMasks(options_);
@@ -304,6 +357,10 @@ PipelineResult EmbeddedPipeline::Run(FrameSource& frames) {
       carve_masks.push_back(std::move(mask));
     }
   }
+  if (delay > 0)
+    spdlog::info("run: geometric consistency: {} of {} checked foreground depths dropped ({:.1f} %)",
+                 st.geometric_dropped, st.geometric_checked,
+                 100.0 * st.geometric_dropped / std::max<long long>(1, st.geometric_checked));
   st.views = done;
   st.frames_read = ds.frames_read;
   st.max_frames_held_depth = ds.max_frames_held;
@@ -413,6 +470,8 @@ PipelineResult EmbeddedPipeline::Run(FrameSource& frames) {
         {"sparse_pixels", st.sparse_pixels},
         {"filtered_pixels", st.filtered_pixels},
         {"fused_pixels", st.fused_pixels},
+        {"geometric_checked", st.geometric_checked},
+        {"geometric_dropped", st.geometric_dropped},
         {"active_voxels", st.active_voxels},
         {"voxels_above_threshold", st.voxels_above_threshold},
         {"grid_bytes", st.grid_bytes},

@@ -38,6 +38,8 @@ struct PipelineStats {
   int color_frames = 0;
   int masked_views = 0;  // views fused with their mask's free space (PipelineOptions::mask_free_space)
   long long sparse_pixels = 0, filtered_pixels = 0, fused_pixels = 0;  // pixels with depth, summed over views
+  // PipelineOptions::geometric_consistency: foreground dense depths checked (not the view's own) and dropped.
+  long long geometric_checked = 0, geometric_dropped = 0;
   double voxel_size = 0;
   std::size_t active_voxels = 0;
   std::size_t voxels_above_threshold = 0;  // active voxels with H >= the surface threshold

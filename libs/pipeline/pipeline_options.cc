@@ -13,6 +13,7 @@ void PipelineOptions::Check() const {
   if (voxel_size == 0 && voxel_divisions < 1) throw OptionError("voxel_divisions must be >= 1");
   meshing.Check();
   coloring.Check();
+  geometric_consistency.Check();
   if (color_views < 0) throw OptionError("color_views must be >= 0");
   if (refine) refine_options.Check();
   if (carving_views < 0) throw OptionError("carving_views must be >= 0");

@@ -10,6 +10,7 @@
 
 #include "depth/streaming_depth.h"
 #include "fusion/fusion_options.h"
+#include "fusion/geometric_consistency.h"
 #include "fusion/mesh_coloring.h"
 #include "geometry/triangle_mesh.h"
 #include "propagation/depth_propagator.h"
@@ -123,6 +124,11 @@ struct PipelineOptions {
     double confidence = 0.1;  // 0: masks give V only
     double margin_px = 2.0;
   } mask_free_space;
+  // Multi-view geometric consistency of the dense maps before fusion
+  // (fusion/geometric_consistency.h says what it measured). Off by default:
+  // the service's aggregator does not apply it yet, and lfrecon run and the
+  // service fuse the same maps. `lfrecon run --geometric-consistency` turns it on.
+  GeometricConsistencyOptions geometric_consistency;
   // Voxel edge in metres; <= 0: the longest side of V / voxel_divisions.
   double voxel_size = 0;
   int voxel_divisions = 256;
