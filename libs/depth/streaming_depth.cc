@@ -93,6 +93,24 @@ DepthPlan PlanDepth(const std::vector<PinholeView>& views, const StreamingDepthO
   return plan;
 }
 
+std::vector<int> EmitFrames(const DepthPlan& plan) {
+  const int n = plan.num_views();
+  // When (after which frame) each sparse map can be computed: its frame and those it uses are read.
+  auto sparse_ready = [&](int s) {
+    int last = s;
+    for (int j : plan.uses.at(static_cast<std::size_t>(s))) last = std::max(last, j);
+    return last;
+  };
+  std::vector<int> emit(static_cast<std::size_t>(n), -1);
+  for (int i : plan.wanted) {
+    if (i < 0 || i >= n) throw OptionError("depth plan: view " + std::to_string(i) + " is not planned");
+    int last = std::max(sparse_ready(i), plan.read_before_emit.at(static_cast<std::size_t>(i)));
+    for (int j : plan.voters.at(static_cast<std::size_t>(i))) last = std::max(last, sparse_ready(j));
+    emit[static_cast<std::size_t>(i)] = last;
+  }
+  return emit;
+}
+
 StreamingDepthStats StreamingDepth::Run(FrameSource& frames, const std::vector<int>& wanted, const Sink& sink) {
   return Run(frames, PlanDepth(views_, options_, wanted), sink);
 }
@@ -119,15 +137,15 @@ StreamingDepthStats StreamingDepth::Run(FrameSource& frames, const DepthPlan& pl
     frame_last_use[s] = std::max(frame_last_use[s], last);
     for (int j : uses[s]) frame_last_use[j] = std::max(frame_last_use[j], last);
   }
-  std::vector<int> filter_ready(n, -1), sparse_last_use(n, -1);
+  std::vector<int> sparse_last_use(n, -1);
   std::vector<char> is_wanted(n, 0);
-  for (int i : wanted) {
+  for (int i : wanted)
     if (i < 0 || i >= n || !need_sparse[i]) throw OptionError("depth plan: view " + std::to_string(i) + " is not planned");
+  // Every frame within 5° of i is read (and tapped) before i is emitted.
+  const std::vector<int> filter_ready = EmitFrames(plan);
+  for (int i : wanted) {
     is_wanted[i] = 1;
-    // Every frame within 5° of i is read (and tapped) before i is emitted.
-    int last = std::max(sparse_ready[i], plan.read_before_emit[i]);
-    for (int j : voters[i]) last = std::max(last, sparse_ready[j]);
-    filter_ready[i] = last;
+    const int last = filter_ready[i];
     sparse_last_use[i] = std::max(sparse_last_use[i], last);
     for (int j : voters[i]) sparse_last_use[j] = std::max(sparse_last_use[j], last);
   }

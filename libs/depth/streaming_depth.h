@@ -81,6 +81,12 @@ struct DepthPlan {
 DepthPlan PlanDepth(const std::vector<PinholeView>& views, const StreamingDepthOptions& options,
                     std::vector<int> wanted);
 
+// After which frame of the sequence StreamingDepth::Run emits each view of
+// plan.wanted (its sparse map, its voters' and every frame within the angle are
+// then computed and read); -1 for the others. Run emits the wanted views in
+// increasing order of it, ties in increasing view order.
+std::vector<int> EmitFrames(const DepthPlan& plan);
+
 // The views whose sparse maps vote in view i's filtered map (§3.2): its
 // neighbours within the filter's angle (`wide`) that may vote (`can_vote`).
 // PlanDepth lets the views on the hierarchy grid vote (HierarchyGrid: views ≥

@@ -48,6 +48,14 @@ ReconstructionPlan ReconstructionPlan::Compute(const std::vector<PinholeView>& c
     depth.voter_min_step_deg = std::max(depth.voter_min_step_deg, options.selection.min_step_deg);
   plan.depth = PlanDepth(cameras, depth, wanted);  // checks the range, sorts
   plan.views = plan.depth.wanted;
+  plan.emit_frame = EmitFrames(plan.depth);
+  plan.order = plan.views;
+  std::stable_sort(plan.order.begin(), plan.order.end(), [&](int a, int b) {
+    return plan.emit_frame[static_cast<std::size_t>(a)] < plan.emit_frame[static_cast<std::size_t>(b)];
+  });
+  plan.order_position.assign(static_cast<std::size_t>(n), -1);
+  for (std::size_t k = 0; k < plan.order.size(); ++k)
+    plan.order_position[static_cast<std::size_t>(plan.order[k])] = static_cast<int>(k);
   plan.selected.assign(static_cast<std::size_t>(n), 0);
   for (int i : plan.views) plan.selected[static_cast<std::size_t>(i)] = 1;
   plan.photo.assign(static_cast<std::size_t>(n), {});
@@ -67,6 +75,15 @@ ReconstructionPlan ReconstructionPlan::Compute(const std::vector<PinholeView>& c
   if (options.refine && options.refine_options.carve)
     plan.carving_frames = EvenlySpread(plan.views, options.carving_views);
   return plan;
+}
+
+int ReconstructionPlan::FinalOrder(bool ended, const PipelineOptions& options) const {
+  if (ended) return static_cast<int>(order.size());
+  // A view of frame >= settled is emitted at a frame >= settled.
+  const int settled = SettledFrames(num_views(), false, options);
+  int k = 0;
+  while (k < static_cast<int>(order.size()) && emit_frame[static_cast<std::size_t>(order[k])] < settled) ++k;
+  return k;
 }
 
 int ReconstructionPlan::SettledFrames(int received, bool ended, const PipelineOptions& options) {

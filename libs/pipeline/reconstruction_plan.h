@@ -51,6 +51,11 @@ struct ReconstructionPlan {
   static int SettledDepthFrames(int received, bool ended, const PipelineOptions& options);
 
   int num_views() const { return static_cast<int>(selected.size()); }
+  // Of an open stream's plan (Compute on its first num_views() frames): the
+  // leading entries of `order` that the whole stream's plan has in the same
+  // places (settled views emitted before the first unsettled frame, which no
+  // view of a later frame precedes); all of them when `ended`.
+  int FinalOrder(bool ended, const PipelineOptions& options) const;
   bool Selected(int i) const { return selected.at(static_cast<std::size_t>(i)) != 0; }
   bool OnGrid(int i) const { return depth.on_grid.at(static_cast<std::size_t>(i)) != 0; }
   bool NeedsSparse(int i) const { return depth.need_sparse.at(static_cast<std::size_t>(i)) != 0; }
@@ -65,6 +70,15 @@ struct ReconstructionPlan {
   std::vector<char> selected;  // per frame: gets depth, densification and fusion
   std::vector<int> views;      // the selected views, increasing
   DepthPlan depth;             // StreamingDepth's part (wanted = views)
+  // The selected views in the order the depth stage completes them
+  // (EmitFrames: by the frame after which each is emitted, ties by view):
+  // lfrecon run densifies and fuses them in this order, the service's
+  // aggregator fuses them in it, and the geometric consistency check's
+  // neighbours are the views around each in it (a closed loop's first views
+  // come last, beside its last ones).
+  std::vector<int> order;
+  std::vector<int> emit_frame;      // per frame: EmitFrames (-1: not selected)
+  std::vector<int> order_position;  // per frame: its index in `order` (-1: not selected)
   std::vector<std::vector<int>> photo;
   std::vector<int> color_frames;    // options.color_views frames evenly spread over `views`
   std::vector<int> carving_frames;  // options.carving_views likewise, when refining with carving

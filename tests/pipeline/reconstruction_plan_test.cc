@@ -171,7 +171,7 @@ TEST(ReconstructionPlan, PrefixPlanAgreesWithFullPlanOnSettledFrames) {
            at(a.depth.voters) == at(full.depth.voters) && at(a.photo) == at(full.photo) &&
            at(a.depth.read_before_emit) == at(full.depth.read_before_emit);
   };
-  int checked = 0;
+  int checked = 0, known_total = 0;
   for (int p : {1, 30, 60, 61, 100, 200, 400, 700, 999, 1028}) {
     const std::vector<PinholeView> prefix(cams.begin(), cams.begin() + p);
     const ReconstructionPlan part = ReconstructionPlan::Compute(prefix, Box(), o);
@@ -186,8 +186,16 @@ TEST(ReconstructionPlan, PrefixPlanAgreesWithFullPlanOnSettledFrames) {
       for (int i = settled; i < p; ++i) all_same = all_same && same(part, i);
       EXPECT_FALSE(all_same) << "prefix " << p;
     }
+    // The order the views are processed in: the prefix's final part is the whole loop's
+    // (a view is emitted up to 2 gaps after its frame: none is final before ~4 gaps).
+    const int known = part.FinalOrder(false, o);
+    EXPECT_TRUE(std::equal(part.order.begin(), part.order.begin() + known, full.order.begin())) << p;
+    known_total += known;
   }
   EXPECT_GT(checked, 3000);
+  EXPECT_GT(known_total, 0);
+  EXPECT_EQ(full.FinalOrder(true, o), static_cast<int>(full.order.size()));
+  EXPECT_EQ(full.order.size(), full.views.size());
   // Ended: every frame; unbounded gap or given views: none before the end.
   EXPECT_EQ(ReconstructionPlan::SettledFrames(n, true, o), n);
   PipelineOptions unbounded = o;
