@@ -12,6 +12,14 @@ int GeometricConsistencyOptions::Delay() const {
   return *std::max_element(offsets.begin(), offsets.end());
 }
 
+std::vector<int> NeighbourPositions(int position, int count, const GeometricConsistencyOptions& options) {
+  std::vector<int> out;
+  for (int o : options.offsets)
+    for (int q : {position - o, position + o})
+      if (q >= 0 && q < count) out.push_back(q);
+  return out;
+}
+
 void GeometricConsistencyOptions::Check() const {
   if (!enabled) return;
   LFRECON_CHECK_OPTION(!offsets.empty());

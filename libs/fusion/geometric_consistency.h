@@ -29,13 +29,13 @@
 namespace lfrecon {
 
 struct GeometricConsistencyOptions {
-  // Off by default: the service's aggregator does not yet hold maps back for it
-  // (lfrecon run and the service must fuse the same maps).
-  bool enabled = false;
-  // The neighbours: the processed views at these offsets before and after the
-  // view in the order they are processed (the plan's views are >= 2° apart
-  // by default: 2°, 4°, 8°, 16°). A view is fused once the maps after it are
-  // there, i.e. max(offsets) views late.
+  // On by default, in lfrecon run and in the service's aggregator alike
+  // (--no-geometric-consistency turns it off).
+  bool enabled = true;
+  // The neighbours: the plan's views at these offsets before and after the
+  // view in the order they are processed (ReconstructionPlan::order; >= 2°
+  // apart by default: 2°, 4°, 8°, 16°). A view is fused once the maps of its
+  // neighbours are there, i.e. max(offsets) views late.
   std::vector<int> offsets = {1, 2, 4, 8};
   // Neighbour maps that must agree (of up to 2 · offsets.size()).
   int min_agree = 4;
@@ -56,6 +56,10 @@ struct GeometricConsistencyStats {
   long long own = 0;         // of them, the view's own filtered depth (not checked)
   long long dropped = 0;     // of them, confirmed by fewer than min_agree neighbours: depth removed
 };
+
+// The positions of a view's neighbours in a list of `count` views (the plan's):
+// position ± each offset, those in [0, count), nearest first.
+std::vector<int> NeighbourPositions(int position, int count, const GeometricConsistencyOptions& options);
 
 // Nonzero where `dense` has a depth within `tolerance` (relative) of `filtered`'s at the same pixel.
 cv::Mat OwnDepthMask(const DepthMap& dense, const DepthMap& filtered, double tolerance);

@@ -245,29 +245,33 @@ PipelineResult EmbeddedPipeline::Run(FrameSource& frames) {
     if (view_callback_) view_callback_(i, done, static_cast<int>(wanted.size()));
   };
   // Multi-view geometric consistency (GeometricConsistencyOptions): each dense
-  // map waits until the `delay` processed views after it are densified, then
-  // is checked against the unchecked maps at its offsets and fused.
+  // map waits until the maps of its neighbours (positions ± the offsets in
+  // plan.order, the order the depth stage completes the views in) are
+  // densified, is checked against them unchecked, and is fused, in plan.order
+  // (as the service's aggregator does).
   const GeometricConsistencyOptions& gc = options_.geometric_consistency;
   const int delay = options_.densify ? gc.Delay() : 0;
+  const int num_wanted = static_cast<int>(plan.order.size());
   struct PendingView {
-    int view, position;
+    int view;
     DepthMap dense;
     PackedDepthMap sparse;  // for the background floor's gate
     cv::Mat own;
   };
-  std::deque<PendingView> pending;
-  std::deque<std::pair<int, cv::Mat>> recent;  // (view, unchecked dense depth) from processed position recent_base on
-  int processed = 0, recent_base = 0;
-  auto check_and_fuse = [&]() {
-    PendingView pv = std::move(pending.front());
-    pending.pop_front();
+  std::map<int, PendingView> pending;  // by position in plan.order
+  std::map<int, cv::Mat> unchecked;    // position -> unchecked dense depth, while a pending view needs it
+  int next_fuse = 0;                   // position fused next
+  auto ready = [&](int p) {
+    for (int q : NeighbourPositions(p, num_wanted, gc))
+      if (!unchecked.count(q)) return false;
+    return true;
+  };
+  auto check_and_fuse = [&](PendingView pv, int p) {
     std::vector<NeighbourDepth> nbs;
-    for (int o : gc.offsets)
-      for (int sign : {-1, 1}) {
-        const int q = pv.position + sign * o - recent_base;
-        if (q < 0 || q >= static_cast<int>(recent.size())) continue;
-        nbs.push_back({&views_[recent[q].first], &recent[q].second});
-      }
+    for (int q : NeighbourPositions(p, num_wanted, gc)) {
+      const auto it = unchecked.find(q);
+      if (it != unchecked.end()) nbs.push_back({&views_[plan.order[q]], &it->second});
+    }
     Timer t;
     const GeometricConsistencyStats gs = ApplyGeometricConsistency(views_[pv.view], pv.own, nbs, volume_, gc, &pv.dense);
     st.geometric_checked += gs.foreground - gs.own;
@@ -275,9 +279,17 @@ PipelineResult EmbeddedPipeline::Run(FrameSource& frames) {
     st.seconds_fusion += t.Seconds();
     st.cpu_fusion += t.CpuSeconds();
     fuse(pv.view, pv.dense, pv.sparse.Unpack());
-    // Maps no pending view will look back at any more.
-    const int oldest = pending.empty() ? processed : pending.front().position;
-    while (!recent.empty() && recent_base < oldest - delay) recent.pop_front(), ++recent_base;
+  };
+  // Fuses the pending views from next_fuse on while their neighbours are there
+  // (all of them at the end, `flush`: those missing were never densified).
+  auto fuse_ready = [&](bool flush) {
+    for (auto it = pending.begin(); it != pending.end() && (flush || (it->first == next_fuse && ready(next_fuse)));) {
+      next_fuse = it->first + 1;
+      check_and_fuse(std::move(it->second), it->first);
+      it = pending.erase(it);
+      // Maps no view after next_fuse looks back at.
+      while (!unchecked.empty() && unchecked.begin()->first < next_fuse - delay) unchecked.erase(unchecked.begin());
+    }
   };
 
   const StreamingDepthStats ds = depth.Run(
@@ -329,13 +341,14 @@ PipelineResult EmbeddedPipeline::Run(FrameSource& frames) {
           fuse(i, fused_map, sparse);
           return;
         }
-        // Geometric consistency: the map waits for the `delay` maps after it.
-        recent.push_back({i, fused_map.depth.clone()});
-        pending.push_back({i, processed++, std::move(fused_map), PackedDepthMap::Pack(sparse), std::move(own)});
-        while (!pending.empty() && pending.front().position + delay < processed) check_and_fuse();
+        // Geometric consistency: the map waits for its neighbours' maps.
+        const int p = plan.order_position[i];
+        unchecked[p] = fused_map.depth.clone();
+        pending[p] = {i, std::move(fused_map), PackedDepthMap::Pack(sparse), std::move(own)};
+        fuse_ready(false);
       });
-  while (!pending.empty()) check_and_fuse();  // the last views, with the neighbours before them
-  recent.clear();
+  fuse_ready(true);  // every view is densified: nothing is missing
+  unchecked.clear();
   window.clear();
   // The carving frames' object masks (CarvingOptions::carve_outside_masks).
   const bool mask_carving = mask_of_view_ && CarvesOutsideMasks(options_);

@@ -20,7 +20,7 @@ PipelineOptions OptionsFromFlags(const ReconstructionFlags& f) {
     options.depth.max_frame_gap = *f.max_frame_gap;
   }
   if (f.no_mask_free_space) options.mask_free_space.confidence = 0;
-  options.geometric_consistency.enabled = f.geometric_consistency;
+  if (f.no_geometric_consistency) options.geometric_consistency.enabled = false;
   if (f.mask_carving) options.refine_options.carving.carve_outside_masks = true;
   if (f.chroma_weight) {
     if (!(*f.chroma_weight >= 0 && *f.chroma_weight <= 1)) throw OptionError("--chroma-weight must be in [0, 1]");

@@ -21,8 +21,8 @@ struct ReconstructionFlags {
   std::optional<int> max_frame_gap;
   // Object masks give V only (--no-mask-free-space): PipelineOptions::mask_free_space off.
   bool no_mask_free_space = false;
-  // PipelineOptions::geometric_consistency on (--geometric-consistency; lfrecon run only for now).
-  bool geometric_consistency = false;
+  // PipelineOptions::geometric_consistency off (--no-geometric-consistency).
+  bool no_geometric_consistency = false;
   // Object masks also carve the fused voxels outside them (--mask-carving):
   // CarvingOptions::carve_outside_masks on (used where the refinement carves).
   bool mask_carving = false;

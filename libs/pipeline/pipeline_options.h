@@ -125,9 +125,8 @@ struct PipelineOptions {
     double margin_px = 2.0;
   } mask_free_space;
   // Multi-view geometric consistency of the dense maps before fusion
-  // (fusion/geometric_consistency.h says what it measured). Off by default:
-  // the service's aggregator does not apply it yet, and lfrecon run and the
-  // service fuse the same maps. `lfrecon run --geometric-consistency` turns it on.
+  // (fusion/geometric_consistency.h says what it measured). On by default, in
+  // lfrecon run and the service alike; --no-geometric-consistency turns it off.
   GeometricConsistencyOptions geometric_consistency;
   // Voxel edge in metres; <= 0: the longest side of V / voxel_divisions.
   double voxel_size = 0;

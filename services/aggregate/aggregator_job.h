@@ -18,6 +18,7 @@
 #include <vector>
 
 #include "aggregator.h"
+#include "common/stored_depth.h"
 #include "fusion/probabilistic_fusion.h"
 
 namespace lfrecon::svc {
@@ -63,12 +64,18 @@ struct Aggregator::Job {
   std::unique_ptr<ProbabilisticFusion> fusion;  // guarded by grid_mu; released when the thread stops
   std::mutex queue_mu;                          // guards queue, fused (and stop's changes, for the wait)
   std::condition_variable queue_cv;
-  std::deque<std::pair<int, bool>> queue;  // (view, append to fused.log): stored dense maps to fuse, in order
+  // (view, append to fused.log): stored dense maps to fuse, in arrival order;
+  // with the geometric consistency check they are fused in the plan's order
+  // instead, each once its neighbours' maps are stored (ConsistencyNeighbours).
+  std::deque<std::pair<int, bool>> queue;
   std::atomic<bool> stop{false};
   std::vector<char> fused;
+  std::vector<char> stored;  // views whose dense map is in the store (Enqueue; cleared when found unreadable)
   std::vector<int> unreadable;  // stored dense maps the fusion thread could not read: done again
   std::atomic<int> views_fused{0};  // changes under grid_mu (with the grid)
   std::atomic<int> masked_views{0};  // of those, fused with their frame's mask as free space
+  // Geometric consistency: foreground depths checked (not the views' own) and dropped, of the views fused.
+  std::atomic<long long> geometric_checked{0}, geometric_dropped{0};
   std::atomic<std::uint64_t> active_voxels{0};
   enum Outcome { kFusing = 0, kFinished = 1, kFailed = 2 };
   std::atomic<int> outcome{kFusing};  // kFinished: every view fused, outputs written
@@ -96,6 +103,7 @@ struct Aggregator::Job {
     {
       std::lock_guard<std::mutex> lk(queue_mu);
       fused.resize(size, 0);
+      stored.resize(size, 0);
     }
     queue_cv.notify_all();  // an ended stream may have every view fused already
   }

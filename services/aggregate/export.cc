@@ -97,12 +97,16 @@ pb::Envelope RefinedExportReply(const JobStore& store, RefineSnapshot snap) {
   const int n = static_cast<int>(geo.views.size());
   Timer tf;
   std::unique_ptr<ProbabilisticFusion> fusion = NewFusion(geo);
+  StoredDepthCache depths(store, snap.id, 2 * static_cast<std::size_t>(po.geometric_consistency.Delay()) + 2);
   int fused = 0;
   for (int v = 0; v < n; ++v) {
     if (!snap.fused[v]) continue;
     if (StopRequested()) throw std::runtime_error("lfrecon-aggregate is stopping");
-    // As the job's fusion integrated it (background floor, the mask's free space), as lfrecon run does.
-    DepthMap dense = store.ReadMap(snap.id, pb::MAP_DENSE, v, geo.views[v]);
+    // As the job's fusion integrated it (geometric consistency, background floor, the mask's free space), as
+    // lfrecon run does.
+    cv::Mat own;
+    DepthMap dense = store.ReadMap(snap.id, pb::MAP_DENSE, v, geo.views[v], &own);
+    CheckStoredDenseMap(geo, v, own, &depths, &dense, nullptr);
     fusion->Integrate(geo.views[v], FusionInput(store, geo, v, std::move(dense), nullptr), v);
     ++fused;
   }

@@ -1,11 +1,14 @@
 // lfrecon-aggregate, a job's fusion and checkpoint: loading a job from the
 // store (what a crash left, replaying fused.log), its fusion thread (dense
-// maps into the grid in arrival order, the outputs when the last view is
-// fused), its end and status.
+// maps into the grid in the plan's order, each once its geometric consistency
+// neighbours' maps are stored, as lfrecon run; in arrival order without the
+// check; the outputs when the last view is fused), its end and status.
 #include "aggregator_job.h"
 
 #include <spdlog/spdlog.h>
 
+#include <algorithm>
+#include <iterator>
 #include <sstream>
 
 #include "io/ply.h"
@@ -142,6 +145,7 @@ void Aggregator::Enqueue(Job& job, int view, bool log) const {
   {
     std::lock_guard<std::mutex> lk(job.queue_mu);
     job.queue.emplace_back(view, log);
+    job.stored[view] = 1;
   }
   job.queue_cv.notify_one();
 }
@@ -162,6 +166,9 @@ void Aggregator::FusionLoop(Job* jp) const {
   // queued for fusion is in every one taken after); the options are the same in all.
   std::shared_ptr<const JobGeometry> geo = job.Geometry();
   const PipelineOptions po = geo->options;
+  // Geometric consistency: the neighbours' depths, read once for the views that share them.
+  const bool checked = po.densify && po.geometric_consistency.Delay() > 0;
+  StoredDepthCache depths(store_, id, 2 * static_cast<std::size_t>(po.geometric_consistency.Delay()) + 2);
   Timer replay_timer;
   int done = 0;
   try {
@@ -169,31 +176,70 @@ void Aggregator::FusionLoop(Job* jp) const {
       std::pair<int, bool> item{-1, false};
       {
         std::unique_lock<std::mutex> lk(job.queue_mu);
+        // The next map to fuse: the first queued (arrival order, or fused.log's
+        // when replaying); with the geometric consistency check, the first
+        // unfused view of the plan's order (as lfrecon run fuses them), once
+        // its map and its neighbours' are stored.
+        auto take_ready = [&]() {
+          geo = job.Geometry();
+          for (auto it = job.queue.begin(); it != job.queue.end();)
+            it = job.fused[it->first] ? job.queue.erase(it) : std::next(it);
+          auto pick = job.queue.begin();
+          if (checked && pick != job.queue.end()) {
+            const std::vector<int>& order = geo->plan.order;
+            const auto next = std::find_if(order.begin(), order.end(), [&](int v) { return !job.fused[v]; });
+            if (next == order.end()) return false;
+            pick = std::find_if(job.queue.begin(), job.queue.end(), [&](const auto& e) { return e.first == *next; });
+            if (pick == job.queue.end()) return false;
+            bool complete = true;
+            for (int w : ConsistencyNeighbours(*geo, *next, &complete))
+              if (!job.stored[w]) return false;
+            if (!complete) return false;
+          }
+          if (pick == job.queue.end()) return false;
+          item = *pick;
+          job.queue.erase(pick);
+          return true;
+        };
         // A signal cannot notify: look at StopRequested() now and then. With
         // nothing queued, an ended stream's last views may all be fused already.
         while (!job.stop && !StopRequested() &&
-               (job.outcome != Job::kFusing || (job.queue.empty() && !job.AllFused())))
+               (job.outcome != Job::kFusing || (!take_ready() && !job.AllFused())))
           job.queue_cv.wait_for(lk, std::chrono::milliseconds(200));
         if (job.stop || StopRequested()) break;
-        if (!job.queue.empty()) {
-          item = job.queue.front();
-          job.queue.pop_front();
-          if (job.fused[item.first]) continue;
-        }
       }
       geo = job.Geometry();
       if (item.first >= 0) {  // a stored dense map: into the grid
         const int v = item.first;
         DepthMap map;
-        try {
-          map = store_.ReadMap(id, pb::MAP_DENSE, v, geo->views[v]);
-        } catch (const InputError& e) {  // a map the store lost (a crash): the view is done again
-          spdlog::warn("aggregate: job {}: stored dense map of view {} unreadable ({}): removed, re-issued", id, v,
+        cv::Mat own;
+        // A map the store lost (a crash): the view is done again (and a view whose neighbour it is waits for it).
+        auto lost = [&](int w, const std::exception& e) {
+          spdlog::warn("aggregate: job {}: stored dense map of view {} unreadable ({}): removed, re-issued", id, w,
                        e.what());
           std::error_code ec;
-          fs::remove(store_.MapPath(id, pb::MAP_DENSE, v), ec);
+          fs::remove(store_.MapPath(id, pb::MAP_DENSE, w), ec);
+          depths.Forget(w);
           std::lock_guard<std::mutex> lk(job.queue_mu);
-          job.unreadable.push_back(v);
+          job.unreadable.push_back(w);
+          job.stored[w] = 0;
+        };
+        try {
+          map = store_.ReadMap(id, pb::MAP_DENSE, v, geo->views[v], &own);
+        } catch (const InputError& e) {
+          lost(v, e);
+          continue;
+        }
+        int unreadable = -1;
+        try {
+          const GeometricConsistencyStats gs = CheckStoredDenseMap(*geo, v, own, &depths, &map, &unreadable);
+          job.geometric_checked += gs.foreground - gs.own;
+          job.geometric_dropped += gs.dropped;
+        } catch (const InputError& e) {
+          if (unreadable < 0) throw;
+          lost(unreadable, e);
+          std::lock_guard<std::mutex> lk(job.queue_mu);
+          job.queue.push_front(item);  // fused when the neighbour's map is stored again
           continue;
         }
         bool masked = false;
@@ -296,8 +342,10 @@ void Aggregator::Reap(Job& job) {
   if (outcome == Job::kFailed) {
     EndJob(job, pb::STATE_FAILED, "fusion: " + job.fusion_error);
   } else if (outcome == Job::kFinished) {
-    spdlog::info("aggregate: job {}: {} views fused ({} with their mask's free space), mesh {} triangles ({:.1f} s)",
-                 job.id, job.views_fused.load(), job.masked_views.load(), job.triangles, job.seconds_outputs);
+    spdlog::info("aggregate: job {}: {} views fused ({} with their mask's free space; geometric consistency dropped "
+                 "{} of {} checked foreground depths), mesh {} triangles ({:.1f} s)",
+                 job.id, job.views_fused.load(), job.masked_views.load(), job.geometric_dropped.load(),
+                 job.geometric_checked.load(), job.triangles, job.seconds_outputs);
     EndJob(job, pb::STATE_DONE, "");
   }
 }

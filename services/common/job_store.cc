@@ -263,11 +263,12 @@ void JobStore::WriteMap(const std::string& id, const pb::DepthMap& map) const {
   WriteFileAtomic(MapPath(id, map.kind(), static_cast<int>(map.view())), map.SerializeAsString());
 }
 
-DepthMap JobStore::ReadMap(const std::string& id, pb::MapKind kind, int view, const PinholeView& expect) const {
+DepthMap JobStore::ReadMap(const std::string& id, pb::MapKind kind, int view, const PinholeView& expect,
+                           cv::Mat* own) const {
   const fs::path path = MapPath(id, kind, view);
   pb::DepthMap m;
   ParseFile(path, &m);
-  return DepthMapFromProto(m, expect.width, expect.height, path.string());
+  return DepthMapFromProto(m, expect.width, expect.height, path.string(), own);
 }
 
 void JobStore::WriteText(const std::string& id, const std::string& name, const std::string& text) const {
@@ -553,7 +554,7 @@ pb::Frame StoreFrameEncoder::EncodeImage(int k, bool validate) {
   return FrameToProto(k, prepared_->Read(k).image, camera);
 }
 
-pb::DepthMap DepthMapToProto(const DepthMap& map, int view, pb::MapKind kind) {
+pb::DepthMap DepthMapToProto(const DepthMap& map, int view, pb::MapKind kind, const cv::Mat& own) {
   pb::DepthMap m;
   m.set_view(view);
   m.set_kind(kind);
@@ -568,10 +569,12 @@ pb::DepthMap DepthMapToProto(const DepthMap& map, int view, pb::MapKind kind) {
   put(map.depth, CV_32F, m.mutable_depth());
   put(map.confidence, CV_32F, m.mutable_confidence());
   put(map.label, CV_8U, m.mutable_label());
+  if (!own.empty() && own.size() != map.depth.size()) throw std::invalid_argument("own-depth mask of another size");
+  put(own, CV_8U, m.mutable_own());
   return m;
 }
 
-DepthMap DepthMapFromProto(const pb::DepthMap& m, int width, int height, const std::string& what) {
+DepthMap DepthMapFromProto(const pb::DepthMap& m, int width, int height, const std::string& what, cv::Mat* own) {
   if (static_cast<int>(m.width()) != width || static_cast<int>(m.height()) != height)
     throw InputError(what, "size", "depth map is " + std::to_string(m.width()) + "x" + std::to_string(m.height()) +
                                        ", its view " + std::to_string(width) + "x" + std::to_string(height));
@@ -589,6 +592,8 @@ DepthMap DepthMapFromProto(const pb::DepthMap& m, int width, int height, const s
   if (d.depth.empty()) throw InputError(what, "depth", "missing");
   d.confidence = get(m.confidence(), CV_32F, 4, "confidence");
   d.label = get(m.label(), CV_8U, 1, "label");
+  cv::Mat own_mask = get(m.own(), CV_8U, 1, "own");
+  if (own) *own = std::move(own_mask);
   if (cv::checkRange(d.depth, true) == false) throw InputError(what, "depth", "non-finite values");
   if (!d.confidence.empty() && !cv::checkRange(d.confidence, true)) throw InputError(what, "confidence", "non-finite values");
   return d;
@@ -604,6 +609,7 @@ ReconstructionFlags JobFlags(const pb::JobOptions& o) {
   if (o.has_max_frame_gap()) f.max_frame_gap = o.max_frame_gap();
   f.no_mask_free_space = o.no_mask_free_space();
   f.mask_carving = o.mask_carving();
+  f.no_geometric_consistency = o.no_geometric_consistency();
   if (o.has_view_step_deg()) f.view_step_deg = o.view_step_deg();
   return f;
 }

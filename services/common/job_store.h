@@ -64,7 +64,9 @@ class JobStore {
   // camera's size, nonzero = the object); an empty Mat when the frame has none.
   cv::Mat ReadMask(const std::string& id, int index, const PinholeView& expect) const;
   void WriteMap(const std::string& id, const pb::DepthMap& map) const;
-  DepthMap ReadMap(const std::string& id, pb::MapKind kind, int view, const PinholeView& expect) const;
+  // `own` (may be null): the map's own-depth mask (pb::DepthMap.own; empty when it has none).
+  DepthMap ReadMap(const std::string& id, pb::MapKind kind, int view, const PinholeView& expect,
+                   cv::Mat* own = nullptr) const;
 
   // Small marker/state files.
   void WriteText(const std::string& id, const std::string& name, const std::string& text) const;
@@ -167,8 +169,12 @@ class StoreFrameEncoder {
   std::unique_ptr<FrameSource> video_;     // raw video frames, sequential
   std::unique_ptr<FrameSource> prepared_;  // the dataset's own frames, for other formats
 };
-pb::DepthMap DepthMapToProto(const DepthMap& map, int view, pb::MapKind kind);
-DepthMap DepthMapFromProto(const pb::DepthMap& map, int width, int height, const std::string& what);
+// `own`: CV_8U of the map's size (pb::DepthMap.own), or empty.
+pb::DepthMap DepthMapToProto(const DepthMap& map, int view, pb::MapKind kind, const cv::Mat& own = cv::Mat());
+// Throws InputError naming `what` and the field. `own` (may be null): the own-depth mask, empty when the
+// message has none (its size is checked either way).
+DepthMap DepthMapFromProto(const pb::DepthMap& map, int width, int height, const std::string& what,
+                           cv::Mat* own = nullptr);
 
 // A job's options are `lfrecon run`'s flags (pipeline/pipeline_flags.h); the
 // pipeline options follow from them by the same mapping as run's (OptionsFromFlags).

@@ -42,7 +42,7 @@ struct RunArgs {
   std::optional<double> view_step_deg;
   bool no_refine_poses = false;
   bool no_mask_free_space = false;
-  bool geometric_consistency = false;
+  bool no_geometric_consistency = false;
   bool mask_carving = false;
   RunOutputFlags outputs;  // mesh formats, point cloud, COLMAP workspace, report.html
   bool all_views = false;
@@ -83,7 +83,7 @@ int RunPipeline(const RunArgs& args) {
   flags.all_views = args.all_views;
   flags.max_frame_gap = args.max_frame_gap;
   flags.no_mask_free_space = args.no_mask_free_space;
-  flags.geometric_consistency = args.geometric_consistency;
+  flags.no_geometric_consistency = args.no_geometric_consistency;
   flags.mask_carving = args.mask_carving;
   flags.chroma_weight = args.chroma_weight;
   flags.view_step_deg = args.view_step_deg;
@@ -191,10 +191,11 @@ void AddRunCommand(CLI::App& root, int* exit_code) {
   cmd->add_flag("--no-mask-free-space", args->no_mask_free_space,
                 "With masks (masks/, an alpha channel, mask_path): use them for V only. By default the fusion "
                 "also takes every pixel more than 2 px outside its mask as empty space through V");
-  cmd->add_flag("--geometric-consistency", args->geometric_consistency,
-                "Keep a propagated foreground depth only where 4 of the dense maps of the views 1, 2, 4 and 8 "
-                "processed views before and after it see the same point within 1 %; the views' own filtered depths "
-                "are not checked. Off by default (not yet in the service; docs/benchmarks.md)");
+  cmd->add_flag("--no-geometric-consistency", args->no_geometric_consistency,
+                "Fuse every propagated depth. By default a foreground depth is kept only where 4 of the dense "
+                "maps of the views 1, 2, 4 and 8 places before and after it in the plan see the same point within "
+                "1 % (the views' own filtered depths are not checked): the halo that propagation spreads beside "
+                "an object goes (docs/benchmarks.md)");
   cmd->add_flag("--mask-carving", args->mask_carving,
                 "With masks: also carve the fused voxels that lie outside a carving frame's mask (more than 2 px "
                 "and the voxel's own size from its object) before the photo-consistency carving. Off by default: "

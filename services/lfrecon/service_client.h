@@ -53,6 +53,7 @@ int PrintStatus(const std::string& job, const pb::JobStatus& s, bool json);
 struct JobOptionFlags {
   double voxel_mm = 0, sigma_s = 0;
   bool no_densify = false, all_views = false, no_mask_free_space = false, mask_carving = false;
+  bool no_geometric_consistency = false;
   int color_views = 8;
   int max_frame_gap = -1;  // -1: unset (the default)
   std::optional<double> view_step_deg;  // unset: the default

@@ -127,6 +127,10 @@ void JobOptionFlags::AddTo(CLI::App* cmd) {
                 "With masks (masks/, an alpha channel, mask_path; each frame carries its mask to the service): use "
                 "them for V only (as lfrecon run --no-mask-free-space). By default the fusion also takes every pixel "
                 "more than 2 px outside its mask as empty space through V");
+  cmd->add_flag("--no-geometric-consistency", no_geometric_consistency,
+                "Fuse every propagated depth (as lfrecon run --no-geometric-consistency). By default a view's "
+                "foreground depths that are not its own filtered ones are kept only where 4 of the dense maps of "
+                "the views 1, 2, 4 and 8 places before and after it in the plan see the same point");
   cmd->add_flag("--mask-carving", mask_carving,
                 "With masks: the refined mesh (lfrecon export --refine) also carves the fused voxels that lie outside "
                 "a carving frame's mask (more than 2 px and the voxel's own size from its object) before the "
@@ -146,6 +150,7 @@ pb::JobOptions JobOptionFlags::ToProto() const {
   if (view_step_deg) o.set_view_step_deg(*view_step_deg);
   o.set_no_mask_free_space(no_mask_free_space);
   o.set_mask_carving(mask_carving);
+  o.set_no_geometric_consistency(no_geometric_consistency);
   svc::JobPipelineOptions(o);  // every job option checked here, as lfrecon run does (exit 2)
   return o;
 }

@@ -2,7 +2,8 @@
 // filtering (§3.2, VoteGrid) of its sparse map with the sparse maps of the
 // views within 15°, then edge-aware densification (§4, DepthPropagator) with
 // the frames within 5°, all read from the job store. The dense map goes to the
-// aggregator. With the job's no_densify the filtered map goes instead.
+// aggregator, with the mask of its own (filtered) depths for the aggregator's
+// geometric consistency check. With the job's no_densify the filtered map goes instead.
 #include <algorithm>
 #include <iostream>
 #include <memory>
@@ -10,6 +11,7 @@
 
 #include "common/worker_loop.h"
 #include "depth/sliding_vote_grid.h"
+#include "fusion/geometric_consistency.h"
 #include "propagation/depth_propagator.h"
 #include "util/memory.h"
 
@@ -57,7 +59,10 @@ int main(int argc, char** argv) {
       std::vector<const ViewImage*> nbs;
       for (int k = 1; k < task.frames_size(); ++k) nbs.push_back(&cache.Frame(job, static_cast<int>(task.frames(k))));
       const DepthPropagator propagator(po.propagation);
-      return DepthMapToProto(propagator.Run(ref, nbs, base, g.volume).dense, v, pb::MAP_DENSE);
+      const DepthMap dense = propagator.Run(ref, nbs, base, g.volume).dense;
+      // The depths the aggregator's geometric consistency check spares, as lfrecon run marks them.
+      const GeometricConsistencyOptions& gc = po.geometric_consistency;
+      return DepthMapToProto(dense, v, pb::MAP_DENSE, gc.enabled ? OwnDepthMask(dense, base, gc.own_tolerance) : cv::Mat());
     });
   } catch (const std::exception& e) {
     std::cerr << "lfrecon-propagate: error: " << e.what() << "\n";

@@ -148,9 +148,13 @@ TEST(GeometricConsistency, OwnDepthsAreNotCheckedAndTooFewNeighboursDropTheRest)
 TEST(GeometricConsistency, OptionsAreChecked) {
   GeometricConsistencyOptions o;
   EXPECT_NO_THROW(o.Check());
+  EXPECT_EQ(o.Delay(), 8);  // on by default
+  o.enabled = false;
   EXPECT_EQ(o.Delay(), 0);
   o.enabled = true;
-  EXPECT_EQ(o.Delay(), 8);
+  // Neighbour positions: the view's ± each offset, inside the list, nearest first.
+  EXPECT_EQ(NeighbourPositions(4, 10, o), (std::vector<int>{3, 5, 2, 6, 0, 8}));
+  EXPECT_EQ(NeighbourPositions(0, 3, o), (std::vector<int>{1, 2}));
   o.min_agree = 9;
   EXPECT_THROW(o.Check(), OptionError);
   o.min_agree = 4;

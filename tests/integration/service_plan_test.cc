@@ -14,6 +14,7 @@
 
 #include "common/job_store.h"
 #include "common/messaging.h"
+#include "common/stored_depth.h"
 #include "common/test_util.h"
 #include "eval/mesh_metrics.h"
 #include "integration/daemon_process.h"
@@ -81,11 +82,16 @@ TEST(ServicePlan, DenseArcServiceEqualsRunWithOnePlan) {
   const std::string depth_log = procs[2]->Log();
   EXPECT_NE(depth_log.find("stopped after"), std::string::npos) << depth_log;
 
-  // Same plan, same inputs: every selected view's dense map is bit-identical.
+  // Same plan, same inputs: every selected view's dense map, as fused (its
+  // stored map and own-depth mask checked against the stored maps of its plan
+  // neighbours), is bit-identical to lfrecon run's.
   DatasetOptions d;
   d.dataset_dir = data;
   const Dataset ds = Dataset::Open(d);
   JobStore js(store);
+  const JobGeometry geo = LoadJobGeometry(js, job);
+  StoredDepthCache depths(js, job, 32);
+  long long dropped = 0;
   int compared = 0, identical = 0;
   for (int v = 0; v < ds.NumViews(); ++v) {
     const fs::path pfm = run_dir / "depth" / (fs::path(ds.views()[v].name).stem().string() + ".pfm");
@@ -94,7 +100,10 @@ TEST(ServicePlan, DenseArcServiceEqualsRunWithOnePlan) {
     EXPECT_EQ(in_run, v % 4 == 0) << "view " << v;
     if (!in_run || !in_service) continue;
     const cv::Mat a = ReadPfm(pfm);
-    const DepthMap b = js.ReadMap(job, pb::MAP_DENSE, v, ds.View(v));
+    cv::Mat own;
+    DepthMap b = js.ReadMap(job, pb::MAP_DENSE, v, ds.View(v), &own);
+    EXPECT_FALSE(own.empty()) << "view " << v << ": the propagation worker marks its own depths";
+    dropped += CheckStoredDenseMap(geo, v, own, &depths, &b, nullptr).dropped;
     ++compared;
     identical += cv::norm(a, b.depth, cv::NORM_INF) == 0;
   }
@@ -105,8 +114,9 @@ TEST(ServicePlan, DenseArcServiceEqualsRunWithOnePlan) {
   const TriangleMesh run_mesh = ReadPly(run_dir / "mesh_raw.ply");
   const TriangleMesh svc_mesh = ReadPly(store / job / "mesh_raw.ply");
   ASSERT_GT(run_mesh.triangles.size(), 100u);
-  std::printf("dense arc: %d of %d views selected; %d/%d dense maps identical; mesh_raw run %zu, service %zu triangles\n",
-              selected, kFrames, identical, compared, run_mesh.triangles.size(), svc_mesh.triangles.size());
+  std::printf("dense arc: %d of %d views selected; %d/%d dense maps identical (%lld depths dropped by the geometric "
+              "consistency check); mesh_raw run %zu, service %zu triangles\n",
+              selected, kFrames, identical, compared, dropped, run_mesh.triangles.size(), svc_mesh.triangles.size());
   EXPECT_EQ(svc_mesh.triangles.size(), run_mesh.triangles.size());
   EXPECT_EQ(svc_mesh.vertices.size(), run_mesh.vertices.size());
   double max_dv = 0;

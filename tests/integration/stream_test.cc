@@ -15,6 +15,7 @@
 
 #include "common/job_store.h"
 #include "common/messaging.h"
+#include "common/stored_depth.h"
 #include "common/stream_client.h"
 #include "common/test_util.h"
 #include "io/dataset.h"
@@ -111,13 +112,19 @@ TEST_F(StreamTest, StreamOfDenseArcEqualsRun) {
   DatasetOptions d;
   d.dataset_dir = data;
   const Dataset ds = Dataset::Open(d);
+  // Each stored dense map as the aggregator fused it (geometric consistency with its plan neighbours' maps).
+  const JobGeometry geo = LoadJobGeometry(js, job);
+  StoredDepthCache depths(js, job, 32);
   int compared = 0, identical = 0;
   for (int v = 0; v < kFrames; ++v) {
     const fs::path pfm = run_dir / "depth" / (fs::path(ds.views()[v].name).stem().string() + ".pfm");
     EXPECT_EQ(fs::exists(pfm), js.HasMap(job, pb::MAP_DENSE, v)) << "view " << v;
     if (!fs::exists(pfm) || !js.HasMap(job, pb::MAP_DENSE, v)) continue;
     ++compared;
-    identical += cv::norm(ReadPfm(pfm), js.ReadMap(job, pb::MAP_DENSE, v, ds.View(v)).depth, cv::NORM_INF) == 0;
+    cv::Mat own;
+    DepthMap fused = js.ReadMap(job, pb::MAP_DENSE, v, ds.View(v), &own);
+    CheckStoredDenseMap(geo, v, own, &depths, &fused, nullptr);
+    identical += cv::norm(ReadPfm(pfm), fused.depth, cv::NORM_INF) == 0;
   }
   EXPECT_EQ(compared, selected);
   EXPECT_EQ(identical, compared);
@@ -141,14 +148,16 @@ TEST_F(StreamTest, StreamOfDenseArcEqualsRun) {
 
 // The growing plan (issue 14 §1): a stream that gives V and a frame-gap bound
 // is planned as its frames arrive. Views whose plan entries no later frame can
-// change (ReconstructionPlan::SettledFrames) are leased and fused while the
-// stream is open: status counts them, and `--follow` and a mid-stream export
-// return a mesh that grows. At the end the whole plan is lfrecon run's
-// (--max-frame-gap alike), so the mesh is the same. A second stream survives
-// kill -9 of the aggregator mid-stream: the restarted one resumes the open
-// stream from the store and its checkpoint, and ends with the same mesh.
+// change (ReconstructionPlan::SettledFrames) are leased while the stream is
+// open, and fused once the 8 views after them in the plan's order are final
+// too (geometric consistency): status counts them, and `--follow` and a
+// mid-stream export return a mesh that grows. At the end the whole plan is
+// lfrecon run's (--max-frame-gap alike), so the mesh is the same. A second
+// stream survives kill -9 of the aggregator mid-stream: the restarted one
+// resumes the open stream from the store and its checkpoint, and ends with the
+// same mesh. 150 frames: the first view is fused once ~80 are in.
 TEST_F(StreamTest, GrowingPlanFusesWhileStreamingAndEqualsRun) {
-  constexpr int kFrames = 90, kGap = 15;
+  constexpr int kFrames = 150, kGap = 15;
   const fs::path data = Synth(kFrames, 96, 54);
   const std::string gap = " --max-frame-gap " + std::to_string(kGap);
   const std::string voxel = " --voxel-mm " + std::to_string(kVoxelMm) + kViewStep;
@@ -157,16 +166,16 @@ TEST_F(StreamTest, GrowingPlanFusesWhileStreamingAndEqualsRun) {
      run_dir.string());
   const nlohmann::json report = nlohmann::json::parse(ReadFileBytes(run_dir / "report.json"));
   const int selected = report["views"]["processed"];
-  EXPECT_EQ(selected, (kFrames + 3) / 4);  // every fourth view (0.3° apart, selected >= 1°): 0, 4, ..., 88
+  EXPECT_EQ(selected, (kFrames + 3) / 4);  // every fourth view (0.3° apart, selected >= 1°): 0, 4, ..., 148
   const TriangleMesh run_mesh = ReadPly(run_dir / "mesh_raw.ply");
   ASSERT_GT(run_mesh.triangles.size(), 100u);
-  auto largest_difference = [&](const TriangleMesh& m) {
-    EXPECT_EQ(m.vertices.size(), run_mesh.vertices.size());
-    EXPECT_EQ(m.triangles.size(), run_mesh.triangles.size());
-    if (m.vertices.size() != run_mesh.vertices.size()) return 1e9;
+  auto largest_difference = [](const TriangleMesh& m, const TriangleMesh& run) {
+    EXPECT_EQ(m.vertices.size(), run.vertices.size());
+    EXPECT_EQ(m.triangles.size(), run.triangles.size());
+    if (m.vertices.size() != run.vertices.size()) return 1e9;
     double d = 0;
     for (std::size_t k = 0; k < m.vertices.size(); ++k)
-      d = std::max(d, static_cast<double>((m.vertices[k] - run_mesh.vertices[k]).norm()));
+      d = std::max(d, static_cast<double>((m.vertices[k] - run.vertices[k]).norm()));
     return d;
   };
   StartStack(1);
@@ -223,10 +232,17 @@ TEST_F(StreamTest, GrowingPlanFusesWhileStreamingAndEqualsRun) {
   pb::JobStatus s = Status(job);
   EXPECT_EQ(s.state(), pb::STATE_DONE) << s.message();
   EXPECT_EQ(s.views_fused(), static_cast<unsigned>(selected));
-  const double followed_difference = largest_difference(ReadPly(store_ / job / "mesh_raw.ply"));
+  const double followed_difference = largest_difference(ReadPly(store_ / job / "mesh_raw.ply"), run_mesh);
   EXPECT_EQ(followed_difference, 0.0);
 
   // 2. Pushed by a client; the aggregator killed (-9) once views are fused, and restarted.
+  // Without the geometric consistency check (JobOptions.no_geometric_consistency): with it a
+  // view waits for the 8 views after it in the plan's order, and on this 90-frame arc only
+  // 4 of the 23 views are fused before the end (part 1 sees them), too few to kill mid-way.
+  // Its end is lfrecon run --no-geometric-consistency's mesh.
+  Sh(kBin + "lfrecon -q run --dataset " + data.string() + " --no-refine-poses --no-refine --no-geometric-consistency" +
+     voxel + gap + " --out " + (tmp_.path() / "run_unchecked").string());
+  const TriangleMesh run_unchecked = ReadPly(tmp_.path() / "run_unchecked" / "mesh_raw.ply");
   BoundingBox v;
   const std::vector<pb::Frame> frames = Frames(data, &v);
   StreamClient client(context_, ing_);
@@ -234,6 +250,7 @@ TEST_F(StreamTest, GrowingPlanFusesWhileStreamingAndEqualsRun) {
   open.mutable_spec()->mutable_options()->set_voxel_size(kVoxelMm / 1000.0);
   open.mutable_spec()->mutable_options()->set_max_frame_gap(kGap);
   open.mutable_spec()->mutable_options()->set_view_step_deg(1.0);
+  open.mutable_spec()->mutable_options()->set_no_geometric_consistency(true);
   client.Open(open, milliseconds(10000));
   const std::string job2 = client.job_id();
   constexpr int kBeforeKill = 60;
@@ -247,7 +264,7 @@ TEST_F(StreamTest, GrowingPlanFusesWhileStreamingAndEqualsRun) {
   procs_[0]->Kill(SIGKILL);
   Start("lfrecon-aggregate", {"--bind", agg_, "--store", store_.string()});
   for (int k = kBeforeKill; k < kFrames; ++k) client.Push(frames[static_cast<std::size_t>(k)], milliseconds(10000));
-  // Every frame is in, the end not yet: the views before frame 90 - 2 gaps (every fourth one) are
+  // Every frame is in, the end not yet: the views before the last frame - 2 gaps (every fourth one) are
   // settled and all get fused; the rest wait for the end.
   const unsigned settled_views = (kFrames - 2 * kGap) / 4;
   for (int i = 0; i < 1200 && Status(job2).views_fused() < settled_views; ++i)
@@ -268,7 +285,7 @@ TEST_F(StreamTest, GrowingPlanFusesWhileStreamingAndEqualsRun) {
     std::this_thread::sleep_for(milliseconds(100));
   EXPECT_EQ(s.state(), pb::STATE_DONE) << s.message();
   EXPECT_EQ(s.views_fused(), static_cast<unsigned>(selected));
-  const double restarted_difference = largest_difference(ReadPly(store_ / job2 / "mesh_raw.ply"));
+  const double restarted_difference = largest_difference(ReadPly(store_ / job2 / "mesh_raw.ply"), run_unchecked);
   EXPECT_EQ(restarted_difference, 0.0);
   std::printf("growing plan: %d frames (gap %d), %d of %d views fused while open (the first seen at %d frames), "
               "mid-stream exports %ld -> %ld vertices, %zu --follow meshes while open; mesh_raw vs lfrecon run: "
