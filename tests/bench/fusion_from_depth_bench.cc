@@ -38,6 +38,7 @@
 #include "eval/mesh_metrics.h"
 #include "grid_components.h"
 #include "fusion/free_space.h"
+#include "fusion/geometric_consistency.h"
 #include "fusion/probabilistic_fusion.h"
 #include "fusion/surface_evidence.h"
 #include "io/dataset.h"
@@ -611,7 +612,9 @@ int main(int argc, char** argv) {
   }
   if (maps.empty()) return 1;
   if (!geo_offsets.empty()) {
-    // Multi-view geometric consistency (diagnosis, not in the pipeline): a
+    // Multi-view geometric consistency: the plain check (no radius, reprojection
+    // or soft weights) is the pipeline's ApplyGeometricConsistency, with
+    // offsets in map order; the variants are diagnoses. A
     // foreground depth (inside V) of map k is kept when at least MIN of the
     // maps k +- o (o in the offsets, in map order) see the same point: their
     // depth within R pixels of its projection is within TOL (relative) of the
@@ -623,6 +626,7 @@ int main(int argc, char** argv) {
     std::vector<cv::Mat> out(maps.size());
     long long fg = 0, dropped = 0;
     long long spared = 0;
+    std::mutex mu;  // guards fg, dropped, spared
     tbb::parallel_for(std::size_t{0}, maps.size(), [&](std::size_t k) {
       out[k] = maps[k].depth.clone();
       cv::Mat own;
@@ -632,6 +636,33 @@ int main(int argc, char** argv) {
       }
       long long l_spared = 0;
       long long l_fg = 0, l_drop = 0;
+      if (geo_radius == 0 && geo_reproj_px <= 0 && !geo_soft) {
+        // The plain check is the pipeline's (ApplyGeometricConsistency), with map-index offsets.
+        GeometricConsistencyOptions gc;
+        gc.offsets = geo_offsets;
+        gc.min_agree = geo_min_agree;
+        gc.depth_tolerance = geo_tol;
+        gc.own_tolerance = geo_tol;
+        std::vector<NeighbourDepth> nbs;
+        for (int o : geo_offsets)
+          for (int sgn : {-1, 1}) {
+            const long j = static_cast<long>(k) + sgn * o;
+            if (j >= 0 && j < static_cast<long>(maps.size())) nbs.push_back({&vs[j], &maps[j].depth});
+          }
+        DepthMap checked;
+        checked.depth = out[k];  // shares out[k]'s pixels: the check writes into it
+        checked.confidence = cv::Mat::zeros(out[k].size(), CV_32F);
+        checked.label = cv::Mat::zeros(out[k].size(), CV_8U);
+        DepthMap filtered;
+        filtered.depth = own;
+        const cv::Mat own_mask = own.empty() ? cv::Mat() : OwnDepthMask(maps[k], filtered, geo_tol);
+        const GeometricConsistencyStats gs = ApplyGeometricConsistency(vs[k], own_mask, nbs, ds.bbox(), gc, &checked);
+        std::lock_guard<std::mutex> lock(mu);
+        fg += gs.foreground;
+        dropped += gs.dropped;
+        spared += gs.own;
+        return;
+      }
       for (int r = 0; r < maps[k].depth.rows; ++r)
         for (int c = 0; c < maps[k].depth.cols; ++c) {
           const float d = maps[k].depth.at<float>(r, c);
@@ -680,7 +711,6 @@ int main(int argc, char** argv) {
           else
             out[k].at<float>(r, c) = 0;
         }
-      static std::mutex mu;
       std::lock_guard<std::mutex> lock(mu);
       fg += l_fg;
       dropped += l_drop;
