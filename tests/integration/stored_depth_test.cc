@@ -84,6 +84,16 @@ TEST(StoredDepth, NeighboursAreThePlansViewsAtTheOffsets) {
   EXPECT_TRUE(complete);
 }
 
+// On by default for a job, as for lfrecon run; JobOptions.no_geometric_consistency turns it off.
+TEST(StoredDepth, JobOptionTurnsTheCheckOff) {
+  pb::JobOptions o;
+  EXPECT_TRUE(JobPipelineOptions(o).geometric_consistency.enabled);
+  EXPECT_EQ(JobPipelineOptions(o).geometric_consistency.Delay(), 8);
+  o.set_no_geometric_consistency(true);
+  EXPECT_FALSE(JobPipelineOptions(o).geometric_consistency.enabled);
+  EXPECT_EQ(JobPipelineOptions(o).geometric_consistency.Delay(), 0);
+}
+
 TEST(StoredDepth, CacheKeepsTheMostRecentlyUsedDepths) {
   lfrecon::testing::TempDir tmp;
   const JobStore js(tmp.path());
