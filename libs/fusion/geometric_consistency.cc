@@ -25,6 +25,7 @@ void GeometricConsistencyOptions::Check() const {
   LFRECON_CHECK_OPTION(!offsets.empty());
   for (int o : offsets) LFRECON_CHECK_OPTION(o >= 1 && o <= 64);
   LFRECON_CHECK_OPTION(min_agree >= 1 && min_agree <= 2 * static_cast<int>(offsets.size()));
+  LFRECON_CHECK_OPTION(min_agree_fraction >= 0 && min_agree_fraction <= 1);
   LFRECON_CHECK_OPTION(depth_tolerance > 0 && depth_tolerance < 1);
   LFRECON_CHECK_OPTION(own_tolerance >= 0 && own_tolerance < 1);
 }
@@ -50,6 +51,10 @@ GeometricConsistencyStats ApplyGeometricConsistency(const PinholeView& view, con
   const bool has_own = own.size() == map->depth.size();
   const bool has_conf = map->confidence.size() == map->depth.size();
   const bool has_label = map->label.size() == map->depth.size();
+  int present = 0;
+  for (const NeighbourDepth& nb : neighbours) present += nb.view && nb.depth && !nb.depth->empty();
+  const int needed =
+      std::max(options.min_agree, static_cast<int>(std::ceil(options.min_agree_fraction * present - 1e-9)));
   for (int r = 0; r < map->depth.rows; ++r) {
     float* d = map->depth.ptr<float>(r);
     for (int c = 0; c < map->depth.cols; ++c) {
@@ -71,9 +76,9 @@ GeometricConsistencyStats ApplyGeometricConsistency(const PinholeView& view, con
         if (pr < 0 || pc < 0 || pr >= nb.depth->rows || pc >= nb.depth->cols) continue;
         const float dd = nb.depth->at<float>(pr, pc);
         if (dd > 0 && std::abs(dd - z) < options.depth_tolerance * z) ++agree;
-        if (agree >= options.min_agree) break;
+        if (agree >= needed) break;
       }
-      if (agree >= options.min_agree) continue;
+      if (agree >= needed) continue;
       ++st.dropped;
       d[c] = 0;
       if (has_conf) map->confidence.at<float>(r, c) = 0;

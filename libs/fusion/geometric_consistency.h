@@ -37,8 +37,14 @@ struct GeometricConsistencyOptions {
   // apart by default: 2°, 4°, 8°, 16°). A view is fused once the maps of its
   // neighbours are there, i.e. max(offsets) views late.
   std::vector<int> offsets = {1, 2, 4, 8};
-  // Neighbour maps that must agree (of up to 2 · offsets.size()).
+  // Neighbour maps that must agree (of up to 2 · offsets.size()): at least
+  // min_agree, and at least this fraction of the neighbours the view has (a
+  // view at the end of an arc has fewer). 1: every neighbour must see the
+  // point, measured in docs/benchmarks.md ("Every neighbour must agree"):
+  // with redundant views a dropped right depth costs little, a kept wrong one
+  // a sheet.
   int min_agree = 4;
+  double min_agree_fraction = 1.0;
   // Agreement: the neighbour's depth at the point's projection (nearest pixel)
   // within this fraction of the point's depth in that view.
   double depth_tolerance = 0.01;
@@ -72,7 +78,8 @@ struct NeighbourDepth {
 
 // Removes (depth, confidence and label to zero) every foreground depth of
 // `map` that is not its own (`own`: CV_8U of the map's size, nonzero = own;
-// empty: none) and that fewer than options.min_agree of `neighbours` confirm.
+// empty: none) and that fewer than max(options.min_agree, ⌈min_agree_fraction ·
+// the neighbours given⌉) of `neighbours` confirm.
 // A neighbour confirms when the point projects into its image in front of it
 // and its depth at the nearest pixel is within depth_tolerance of the point's
 // depth there. Deterministic; `map` may be shared with no one else.

@@ -641,6 +641,7 @@ int main(int argc, char** argv) {
         GeometricConsistencyOptions gc;
         gc.offsets = geo_offsets;
         gc.min_agree = geo_min_agree;
+        gc.min_agree_fraction = 0;  // MIN is absolute here
         gc.depth_tolerance = geo_tol;
         gc.own_tolerance = geo_tol;
         std::vector<NeighbourDepth> nbs;
