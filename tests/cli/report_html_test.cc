@@ -251,9 +251,11 @@ TEST(RunExports, FilesOtherToolsOpen) {
   const Result fused = Shell("colmap stereo_fusion --workspace_path " + (run / "colmap").string() +
                              " --input_type geometric --output_path " + (tmp.path / "fused.ply").string());
   ASSERT_EQ(fused.code, 0) << fused.output;
-  // COLMAP fuses only pixels whose depth and normal agree in 5 views (10 degrees): a few
-  // hundred of these 96x54 maps (360 measured); 0 when poses, names or the layout are wrong.
-  EXPECT_GT(PlyCount(tmp.path / "fused.ply", "vertex"), 100) << fused.output.substr(fused.output.size() > 2000 ? fused.output.size() - 2000 : 0);
+  // COLMAP fuses only pixels whose depth and normal agree in 5 views (10 degrees): tens to
+  // hundreds of these 96x54 maps (the maps as fused, after the geometric consistency check
+  // that every neighbour must pass: 70 measured; 360 without the check); 0 when poses,
+  // names or the layout are wrong.
+  EXPECT_GT(PlyCount(tmp.path / "fused.ply", "vertex"), 20) << fused.output.substr(fused.output.size() > 2000 ? fused.output.size() - 2000 : 0);
 }
 
 }  // namespace
