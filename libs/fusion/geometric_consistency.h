@@ -60,7 +60,7 @@ struct GeometricConsistencyOptions {
 struct GeometricConsistencyStats {
   long long foreground = 0;  // depths whose point lies inside V
   long long own = 0;         // of them, the view's own filtered depth (not checked)
-  long long dropped = 0;     // of them, confirmed by fewer than min_agree neighbours: depth removed
+  long long dropped = 0;     // of them, confirmed by too few neighbours (min_agree, min_agree_fraction): removed
 };
 
 // The positions of a view's neighbours in a list of `count` views (the plan's):

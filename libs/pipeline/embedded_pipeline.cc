@@ -8,7 +8,6 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
-#include <deque>
 #include <fstream>
 #include <map>
 #include <set>
@@ -255,7 +254,7 @@ PipelineResult EmbeddedPipeline::Run(FrameSource& frames) {
   struct PendingView {
     int view;
     DepthMap dense;
-    PackedDepthMap sparse;  // for the background floor's gate
+    PackedDepthMap sparse;  // for the background floor's gate (empty when the floor is off)
     cv::Mat own;
   };
   std::map<int, PendingView> pending;  // by position in plan.order
@@ -344,7 +343,8 @@ PipelineResult EmbeddedPipeline::Run(FrameSource& frames) {
         // Geometric consistency: the map waits for its neighbours' maps.
         const int p = plan.order_position[i];
         unchecked[p] = fused_map.depth.clone();
-        pending[p] = {i, std::move(fused_map), PackedDepthMap::Pack(sparse), std::move(own)};
+        pending[p] = {i, std::move(fused_map),
+                      NeedsBackgroundFloor(options_) ? PackedDepthMap::Pack(sparse) : PackedDepthMap(), std::move(own)};
         fuse_ready(false);
       });
   fuse_ready(true);  // every view is densified: nothing is missing

@@ -97,7 +97,7 @@ pb::Envelope RefinedExportReply(const JobStore& store, RefineSnapshot snap) {
   const int n = static_cast<int>(geo.views.size());
   Timer tf;
   std::unique_ptr<ProbabilisticFusion> fusion = NewFusion(geo);
-  StoredDepthCache depths(store, snap.id, 2 * static_cast<std::size_t>(po.geometric_consistency.Delay()) + 2);
+  StoredDepthCache depths(store, snap.id, StoredDepthCache::CapacityFor(po.geometric_consistency));
   int fused = 0;
   for (int v = 0; v < n; ++v) {
     if (!snap.fused[v]) continue;

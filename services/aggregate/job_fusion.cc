@@ -168,7 +168,7 @@ void Aggregator::FusionLoop(Job* jp) const {
   const PipelineOptions po = geo->options;
   // Geometric consistency: the neighbours' depths, read once for the views that share them.
   const bool checked = po.densify && po.geometric_consistency.Delay() > 0;
-  StoredDepthCache depths(store_, id, 2 * static_cast<std::size_t>(po.geometric_consistency.Delay()) + 2);
+  StoredDepthCache depths(store_, id, StoredDepthCache::CapacityFor(po.geometric_consistency));
   Timer replay_timer;
   int done = 0;
   try {

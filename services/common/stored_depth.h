@@ -30,6 +30,12 @@ class StoredDepthCache {
  public:
   StoredDepthCache(const JobStore& store, std::string id, std::size_t capacity)
       : store_(store), id_(std::move(id)), capacity_(capacity) {}
+  // Enough for a job's fusion in the plan's order: consecutive views' neighbours
+  // lie within Delay() positions before and after them (2·Delay() + 1 maps),
+  // and one more.
+  static std::size_t CapacityFor(const GeometricConsistencyOptions& options) {
+    return 2 * static_cast<std::size_t>(options.Delay()) + 2;
+  }
   // Throws InputError naming the map's file when it is missing or unreadable.
   cv::Mat Depth(const JobGeometry& geo, int v);
   void Forget(int v) { maps_.erase(v); }
