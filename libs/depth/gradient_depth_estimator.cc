@@ -34,6 +34,7 @@ void GradientDepthOptions::Check() const {
   LFRECON_CHECK_OPTION(max_depth <= 0 || max_depth > min_depth);
   LFRECON_CHECK_OPTION(max_reference_points >= 2);
   LFRECON_CHECK_OPTION(presmooth_sigma >= 0 && presmooth_sigma <= 5);
+  LFRECON_CHECK_OPTION(std::isfinite(ray_margin));
   LFRECON_CHECK_OPTION(level_angle_ratio >= 1.0);
   LFRECON_CHECK_OPTION(level_min_step_deg >= 0 && level_min_step_deg < max_view_angle_deg);
 }
@@ -479,6 +480,7 @@ struct RowJob {
   const FloatImage& ref_grey_px;
   const BoundingBox& volume;
   const PinholeView& vi;
+  const BoundingBox* ray_box;  // edge pixels whose ray misses it are skipped; null: none
   DepthMap& out;
 };
 
@@ -500,6 +502,7 @@ LFRECON_DEPTH_CLONES long long EstimateRows(const RowJob& job, int begin, int en
   const BoundingBox& volume = job.volume;
   const PinholeView& vi = job.vi;
   DepthMap& out = job.out;
+  const Eigen::Vector3d centre = vi.Center();
   long long num_edge = 0;
   std::vector<EpipolarRay> rays(pairs.size());
   std::vector<char> ray_ok(pairs.size());
@@ -514,8 +517,9 @@ LFRECON_DEPTH_CLONES long long EstimateRows(const RowJob& job, int begin, int en
     const float* grow = job.grad.ptr<float>(r);
     for (int c = 0; c < cols; ++c) {
       if (!(grow[c] > o.gradient_threshold)) continue;
-      ++num_edge;
       const Eigen::Vector2d p(c + 0.5, r + 0.5);
+      if (job.ray_box && !RayMeetsBox(centre, vi.Unproject(p, 1.0) - centre, *job.ray_box)) continue;
+      ++num_edge;
       const Eigen::Vector3d ph(p.x(), p.y(), 1.0);
       const float* srow = job.ref_smoothed.ptr<float>(r);
       const Eigen::Vector3f colour(srow[3 * c], srow[3 * c + 1], srow[3 * c + 2]);
@@ -737,11 +741,14 @@ DepthMap GradientDepthEstimator::Estimate(const ViewImage& reference, const std:
   const int rows = reference.image.rows;
   std::atomic<long long> num_edge{0};
 
-  const RowJob job{o, pairs, first_level, order, d_near, d_far, grad, ref_prepared->smoothed, ref_grey_px, volume, vi, out};
+  const BoundingBox ray_box = volume.Grown(std::max(0.0, o.ray_margin) * volume.Extent().maxCoeff());
+  const RowJob job{o,     pairs, first_level, order, d_near, d_far, grad, ref_prepared->smoothed, ref_grey_px, volume,
+                   vi,    o.ray_margin >= 0 ? &ray_box : nullptr, out};
   tbb::parallel_for(tbb::blocked_range<int>(0, rows), [&](const tbb::blocked_range<int>& range) {
     num_edge += EstimateRows(job, range.begin(), range.end());
   });
-  if (num_edge == 0) spdlog::warn("depth: no pixel has a gradient above g = {}; empty depth map", o.gradient_threshold);
+  if (num_edge == 0)
+    spdlog::warn("depth: no pixel with a gradient above g = {} looks towards V; empty depth map", o.gradient_threshold);
   return out;
 }
 

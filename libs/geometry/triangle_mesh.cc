@@ -1,7 +1,10 @@
 #include "geometry/triangle_mesh.h"
 
 #include <Eigen/Geometry>
+#include <algorithm>
+#include <cmath>
 #include <limits>
+#include <utility>
 
 namespace lfrecon {
 
@@ -43,6 +46,22 @@ void TriangleMesh::Bounds(Eigen::Vector3f* min, Eigen::Vector3f* max) const {
     *min = min->cwiseMin(v);
     *max = max->cwiseMax(v);
   }
+}
+
+bool RayMeetsBox(const Eigen::Vector3d& origin, const Eigen::Vector3d& dir, const BoundingBox& box) {
+  double t0 = 0, t1 = std::numeric_limits<double>::infinity();
+  for (int a = 0; a < 3; ++a) {
+    if (std::abs(dir[a]) < 1e-15) {
+      if (origin[a] < box.min[a] || origin[a] > box.max[a]) return false;
+      continue;
+    }
+    double ta = (box.min[a] - origin[a]) / dir[a], tb = (box.max[a] - origin[a]) / dir[a];
+    if (ta > tb) std::swap(ta, tb);
+    t0 = std::max(t0, ta);
+    t1 = std::min(t1, tb);
+    if (t0 > t1) return false;
+  }
+  return true;
 }
 
 }  // namespace lfrecon

@@ -37,6 +37,16 @@ struct BoundingBox {
   }
   Eigen::Vector3d Center() const { return 0.5 * (min + max); }
   Eigen::Vector3d Extent() const { return max - min; }
+  // The box grown by `margin` (metres) on every side.
+  BoundingBox Grown(double margin) const {
+    BoundingBox b = *this;
+    b.min.array() -= margin;
+    b.max.array() += margin;
+    return b;
+  }
 };
+
+// Does the ray from `origin` along `dir` meet `box` (at a parameter >= 0)? Slab test.
+bool RayMeetsBox(const Eigen::Vector3d& origin, const Eigen::Vector3d& dir, const BoundingBox& box);
 
 }  // namespace lfrecon

@@ -60,22 +60,6 @@ bool ReadMap(const std::string& path, DepthMap* m) {
 
 }  // namespace
 
-// Does the ray from `origin` along `dir` meet `box` in front of the camera? (slab test)
-bool RayMeetsBox(const Eigen::Vector3d& origin, const Eigen::Vector3d& dir, const BoundingBox& box) {
-  double t0 = 0, t1 = std::numeric_limits<double>::infinity();
-  for (int a = 0; a < 3; ++a) {
-    if (std::abs(dir[a]) < 1e-15) {
-      if (origin[a] < box.min[a] || origin[a] > box.max[a]) return false;
-      continue;
-    }
-    double ta = (box.min[a] - origin[a]) / dir[a], tb = (box.max[a] - origin[a]) / dir[a];
-    if (ta > tb) std::swap(ta, tb);
-    t0 = std::max(t0, ta);
-    t1 = std::min(t1, tb);
-    if (t0 > t1) return false;
-  }
-  return true;
-}
 
 // Of the map's depths, how many lie on rays that miss V grown by 0, 10, 25
 // and 50 % of its largest extent on every side: pixels whose depth can never

@@ -46,6 +46,43 @@ TEST(GradientDepthEstimator, TexturedSphereWithinHalfPercent) {
   EXPECT_GE(static_cast<double>(fg) / total, 0.97);
 }
 
+TEST(GradientDepthEstimator, EdgePixelsWhoseRayMissesTheGrownVolumeGetNoDepthAndTheRestAreUnchanged) {
+  // A small V in the middle of the textured plane: most of the frame looks
+  // beside it. Pixels whose ray meets V grown by ray_margin of its size keep
+  // exactly the depth they get without the cut; the others get none.
+  auto v = MakeSynthViews("plane", 60, 5.0, 320, 180, 120);
+  const Eigen::Vector3d centre = v.volume.Center(), half = 0.05 * v.volume.Extent();
+  v.volume.min = centre - half;
+  v.volume.max = centre + half;
+  GradientDepthOptions every;
+  every.ray_margin = -1;
+  const GradientDepthOptions cut;  // default margin
+  const DepthMap all = GradientDepthEstimator(every).Estimate(v.ref, v.NeighborPtrs(), v.volume);
+  const DepthMap some = GradientDepthEstimator(cut).Estimate(v.ref, v.NeighborPtrs(), v.volume);
+  const BoundingBox grown = v.volume.Grown(cut.ray_margin * v.volume.Extent().maxCoeff());
+  const Eigen::Vector3d eye = v.ref.view.Center();
+  long long inside = 0, outside = 0, outside_with_depth = 0, mismatched = 0, leaked = 0;
+  for (int r = 0; r < all.depth.rows; ++r)
+    for (int c = 0; c < all.depth.cols; ++c) {
+      const Eigen::Vector3d dir = v.ref.view.Unproject(Eigen::Vector2d(c + 0.5, r + 0.5), 1.0) - eye;
+      const float a = all.depth.at<float>(r, c), b = some.depth.at<float>(r, c);
+      if (RayMeetsBox(eye, dir, grown)) {
+        inside += a > 0;
+        mismatched += a != b || all.confidence.at<float>(r, c) != some.confidence.at<float>(r, c);
+      } else {
+        ++outside;
+        outside_with_depth += a > 0;
+        leaked += b > 0;
+      }
+    }
+  std::printf("rays meeting grown V: %lld depths; missing it: %lld pixels, %lld with a depth uncut\n", inside, outside,
+              outside_with_depth);
+  ASSERT_GT(inside, 100);
+  ASSERT_GT(outside_with_depth, 1000);
+  EXPECT_EQ(mismatched, 0);
+  EXPECT_EQ(leaked, 0);
+}
+
 TEST(GradientDepthEstimator, HierarchyBeatsNearestNeighboursOnly) {
   const auto v = MakeSynthViews("sphere");
   GradientDepthOptions nearest;
