@@ -906,7 +906,7 @@ int main(int argc, char** argv) {
         RefineOptions ro;
         // "c" / "cp" / "p", optionally followed by carving settings: ":r6" rounds (and region depth),
         // ":w0" carve next to the unobserved inside, ":t0.9" consistency threshold, ":m3" min views,
-        // ":s0" sample at voxel centres, e.g. "c:r6:w0".
+        // ":s0" sample at voxel centres, ":c0.5" views below this cosine to the normal get no weight, e.g. "c:r6:w0".
         const std::string head = variant.substr(0, variant.find(':'));
         ro.carve = head.find('c') != std::string::npos;
         ro.use_poisson = head.find('p') != std::string::npos;
@@ -919,6 +919,7 @@ int main(int argc, char** argv) {
           if (key == 't') ro.carving.consistency_threshold = val;
           if (key == 'm') ro.carving.min_views = static_cast<int>(val);
           if (key == 's') ro.carving.sample_at_surface = val != 0;
+          if (key == 'c') ro.carving.min_cos = val;
         }
         Timer tr;
         const RefineResult rr = RefineFusedSurface(fusion, carve_views, ro, meshing);
