@@ -7,104 +7,31 @@
 // the ground truth lies outside the reconstruction). A surface grown or shrunk by a constant shows
 // as a shifted median; a noisy but unbiased one as wide quantiles around 0.
 #include <Eigen/Core>
-#include <Eigen/Geometry>
 
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
-#include <limits>
 #include <string>
-#include <unordered_map>
 #include <vector>
 
 #include "eval/mesh_metrics.h"
 #include "io/dataset.h"
 #include "io/ply.h"
+#include "nearest_triangle.h"
 
 using namespace lfrecon;
 
 namespace {
 
-Eigen::Vector3d ClosestOnTriangle(const Eigen::Vector3d& p, const Eigen::Vector3d& a, const Eigen::Vector3d& b,
-                                  const Eigen::Vector3d& c) {
-  // Ericson, Real-Time Collision Detection 5.1.5.
-  const Eigen::Vector3d ab = b - a, ac = c - a, ap = p - a;
-  const double d1 = ab.dot(ap), d2 = ac.dot(ap);
-  if (d1 <= 0 && d2 <= 0) return a;
-  const Eigen::Vector3d bp = p - b;
-  const double d3 = ab.dot(bp), d4 = ac.dot(bp);
-  if (d3 >= 0 && d4 <= d3) return b;
-  const double vc = d1 * d4 - d3 * d2;
-  if (vc <= 0 && d1 >= 0 && d3 <= 0) return a + d1 / (d1 - d3) * ab;
-  const Eigen::Vector3d cp = p - c;
-  const double d5 = ab.dot(cp), d6 = ac.dot(cp);
-  if (d6 >= 0 && d5 <= d6) return c;
-  const double vb = d5 * d2 - d1 * d6;
-  if (vb <= 0 && d2 >= 0 && d6 <= 0) return a + d2 / (d2 - d6) * ac;
-  const double va = d3 * d6 - d5 * d4;
-  if (va <= 0 && (d4 - d3) >= 0 && (d5 - d6) >= 0) return b + (d4 - d3) / ((d4 - d3) + (d5 - d6)) * (c - b);
-  const double denom = 1.0 / (va + vb + vc);
-  return a + ab * (vb * denom) + ac * (vc * denom);
-}
-
-// Signed distance to a triangle soup within `max_distance` (NaN beyond), hash grid of that cell size.
-class SignedSurfaceDistance {
- public:
-  SignedSurfaceDistance(const TriangleMesh& mesh, double max_distance) : cell_(max_distance) {
-    for (const Eigen::Vector3i& t : mesh.triangles) {
-      const Eigen::Vector3d a = mesh.vertices[t[0]].cast<double>(), b = mesh.vertices[t[1]].cast<double>(),
-                            c = mesh.vertices[t[2]].cast<double>();
-      const Eigen::Vector3d n = (b - a).cross(c - a);
-      if (n.norm() < 1e-18) continue;
-      const int id = static_cast<int>(a_.size());
-      a_.push_back(a), b_.push_back(b), c_.push_back(c), n_.push_back(n.normalized());
-      const Eigen::Vector3d lo = a.cwiseMin(b).cwiseMin(c) / cell_, hi = a.cwiseMax(b).cwiseMax(c) / cell_;
-      for (int i = (int)std::floor(lo.x()); i <= (int)std::floor(hi.x()); ++i)
-        for (int j = (int)std::floor(lo.y()); j <= (int)std::floor(hi.y()); ++j)
-          for (int k = (int)std::floor(lo.z()); k <= (int)std::floor(hi.z()); ++k) cells_[Key(i, j, k)].push_back(id);
-    }
-  }
-  double Signed(const Eigen::Vector3d& p) const {
-    const int ci = (int)std::floor(p.x() / cell_), cj = (int)std::floor(p.y() / cell_),
-              ck = (int)std::floor(p.z() / cell_);
-    double best = cell_ * cell_;
-    int best_id = -1;
-    Eigen::Vector3d best_q;
-    for (int di = -1; di <= 1; ++di)
-      for (int dj = -1; dj <= 1; ++dj)
-        for (int dk = -1; dk <= 1; ++dk) {
-          const auto it = cells_.find(Key(ci + di, cj + dj, ck + dk));
-          if (it == cells_.end()) continue;
-          for (int id : it->second) {
-            const Eigen::Vector3d q = ClosestOnTriangle(p, a_[id], b_[id], c_[id]);
-            const double d2 = (p - q).squaredNorm();
-            if (d2 < best) best = d2, best_id = id, best_q = q;
-          }
-        }
-    if (best_id < 0) return std::numeric_limits<double>::quiet_NaN();
-    const double d = std::sqrt(best);
-    return (p - best_q).dot(n_[best_id]) >= 0 ? d : -d;
-  }
-
- private:
-  static std::uint64_t Key(int i, int j, int k) {
-    const auto u = [](int v) { return static_cast<std::uint64_t>(static_cast<std::uint32_t>(v + (1 << 20))) & 0x1fffff; };
-    return (u(i) << 42) | (u(j) << 21) | u(k);
-  }
-  double cell_;
-  std::vector<Eigen::Vector3d> a_, b_, c_, n_;
-  std::unordered_map<std::uint64_t, std::vector<int>> cells_;
-};
-
-void Report(const char* label, const std::vector<Eigen::Vector3d>& samples, const SignedSurfaceDistance& to,
+void Report(const char* label, const std::vector<Eigen::Vector3d>& samples, const bench::NearestTriangle& to,
             double max_distance) {
   std::vector<double> s;
   std::size_t far = 0;
   for (const auto& p : samples) {
     const double d = to.Signed(p);
-    if (std::isnan(d) || std::abs(d) > max_distance) ++far;
+    if (!(std::abs(d) <= max_distance)) ++far;  // +inf beyond the grid's reach
     else s.push_back(d);
   }
   std::sort(s.begin(), s.end());
@@ -156,9 +83,9 @@ int main(int argc, char** argv) {
     if (v.Contains(p)) mesh_samples.push_back(p);
   for (const auto& p : SampleSurface(gt, 0.001, 2))
     if (v.Contains(p)) gt_samples.push_back(p);
-  Report("reconstruction -> ground truth (+: outside the object)", mesh_samples, SignedSurfaceDistance(gt, max_distance),
+  Report("reconstruction -> ground truth (+: outside the object)", mesh_samples, bench::NearestTriangle(gt, max_distance, 1),
          max_distance);
   Report("ground truth -> reconstruction (+: along the reconstruction's normals)", gt_samples,
-         SignedSurfaceDistance(mesh, max_distance), max_distance);
+         bench::NearestTriangle(mesh, max_distance, 1), max_distance);
   return 0;
 }
