@@ -742,8 +742,9 @@ DepthMap GradientDepthEstimator::Estimate(const ViewImage& reference, const std:
   std::atomic<long long> num_edge{0};
 
   const BoundingBox ray_box = volume.Grown(std::max(0.0, o.ray_margin) * volume.Extent().maxCoeff());
-  const RowJob job{o,     pairs, first_level, order, d_near, d_far, grad, ref_prepared->smoothed, ref_grey_px, volume,
-                   vi,    o.ray_margin >= 0 ? &ray_box : nullptr, out};
+  const BoundingBox* cull = o.ray_margin >= 0 ? &ray_box : nullptr;
+  const RowJob job{o, pairs, first_level, order, d_near, d_far, grad, ref_prepared->smoothed, ref_grey_px, volume, vi,
+                   cull, out};
   tbb::parallel_for(tbb::blocked_range<int>(0, rows), [&](const tbb::blocked_range<int>& range) {
     num_edge += EstimateRows(job, range.begin(), range.end());
   });
