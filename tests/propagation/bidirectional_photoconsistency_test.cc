@@ -340,6 +340,37 @@ TEST(BidirectionalPhotoconsistency, AccumulatorOneNeighbourAtATimeIsBitIdentical
   EXPECT_EQ(cv::countNonZero(none.c_plus), 0);
 }
 
+TEST(BidirectionalPhotoconsistency, EightPixelsAtOnceGiveTheBitsOfOneAtATime) {
+  // The AVX2 path (options.simd, where the CPU has it) against the scalar one,
+  // with chroma weighted and not, with C0 and without, and with depths off the
+  // truth so that samples leave the neighbours and ρ spans (0, 1].
+  const SynthViews v = MakeSynthViews("occlusion");
+  DepthMap depth = TruthAtEdges(v);
+  for (int r = 0; r < depth.depth.rows; ++r)
+    for (int c = 0; c < depth.depth.cols; ++c)
+      if ((r * 7 + c * 3) % 5 == 0) depth.depth.at<float>(r, c) *= 0.6f + 0.1f * static_cast<float>(c % 9);
+  for (const double chroma : {0.5, 1.0})
+    for (const bool centre : {true, false}) {
+      PhotoconsistencyOptions o;
+      o.chroma_weight = chroma;
+      o.centre_consistency = centre;
+      const EdgeConsistency simd = BidirectionalPhotoconsistency(o).Compute(v.ref, v.NeighborPtrs(), depth);
+      o.simd = false;
+      const EdgeConsistency scalar = BidirectionalPhotoconsistency(o).Compute(v.ref, v.NeighborPtrs(), depth);
+      EXPECT_GT(cv::countNonZero(scalar.c_plus), 1000);
+      EXPECT_TRUE(SameBits(simd.c_plus, scalar.c_plus));
+      EXPECT_TRUE(SameBits(simd.c_minus, scalar.c_minus));
+      EXPECT_TRUE(SameBits(simd.evaluated, scalar.evaluated));
+      if (centre) EXPECT_TRUE(SameBits(simd.c_centre, scalar.c_centre));
+      // Some sides are partly outside the neighbours or far off: ρ small but counted.
+      double lo = 1;
+      for (int r = 0; r < scalar.c_plus.rows; ++r)
+        for (int c = 0; c < scalar.c_plus.cols; ++c)
+          if (scalar.evaluated.at<std::uint8_t>(r, c)) lo = std::min<double>(lo, scalar.c_plus.at<float>(r, c));
+      EXPECT_LT(lo, 0.01);
+    }
+}
+
 TEST(ColourDifference, SplitsLumaFromChroma) {
   const Eigen::Vector3f a(0.3f, 0.5f, 0.7f);
   // Weight 1: the plain squared RGB distance, exactly.
