@@ -35,6 +35,7 @@ void GradientDepthOptions::Check() const {
   LFRECON_CHECK_OPTION(max_reference_points >= 2);
   LFRECON_CHECK_OPTION(presmooth_sigma >= 0 && presmooth_sigma <= 5);
   LFRECON_CHECK_OPTION(std::isfinite(ray_margin));
+  LFRECON_CHECK_OPTION(gradient_peak_fraction >= 0 && gradient_peak_fraction <= 1);
   LFRECON_CHECK_OPTION(level_angle_ratio >= 1.0);
   LFRECON_CHECK_OPTION(level_min_step_deg >= 0 && level_min_step_deg < max_view_angle_deg);
 }
@@ -125,6 +126,39 @@ cv::Mat GradientMagnitude(const cv::Mat& image_bgr) {
   cv::Sobel(grey, gy, CV_32F, 0, 1, 3, 1.0 / 8.0);
   cv::magnitude(gx, gy, mag);
   return mag;
+}
+
+cv::Mat GradientPeaks(const cv::Mat& image_bgr, double fraction) {
+  cv::Mat grey, gx, gy, mag;
+  cv::cvtColor(image_bgr, grey, cv::COLOR_BGR2GRAY);
+  cv::Sobel(grey, gx, CV_32F, 1, 0, 3, 1.0 / 8.0);
+  cv::Sobel(grey, gy, CV_32F, 0, 1, 3, 1.0 / 8.0);
+  cv::magnitude(gx, gy, mag);
+  cv::Mat out = cv::Mat::zeros(mag.size(), CV_32F);
+  const int rows = mag.rows, cols = mag.cols;
+  const float tan22 = 0.41421356f;  // tan 22.5°
+  const float f = static_cast<float>(fraction);
+  auto at = [&](int r, int c) { return r < 0 || c < 0 || r >= rows || c >= cols ? 0.0f : mag.ptr<float>(r)[c]; };
+  tbb::parallel_for(0, rows, [&](int r) {
+    const float* x = gx.ptr<float>(r);
+    const float* y = gy.ptr<float>(r);
+    const float* m = mag.ptr<float>(r);
+    float* o = out.ptr<float>(r);
+    for (int c = 0; c < cols; ++c) {
+      const float ax = std::abs(x[c]), ay = std::abs(y[c]);
+      int dr = 0, dc = 0;  // the neighbour along the gradient
+      if (ay <= tan22 * ax) {
+        dc = 1;
+      } else if (ax <= tan22 * ay) {
+        dr = 1;
+      } else {
+        dr = 1;
+        dc = (x[c] > 0) == (y[c] > 0) ? 1 : -1;
+      }
+      if (m[c] >= f * std::max(at(r + dr, c + dc), at(r - dr, c - dc))) o[c] = m[c];
+    }
+  });
+  return out;
 }
 
 namespace {
@@ -736,7 +770,8 @@ DepthMap GradientDepthEstimator::Estimate(const ViewImage& reference, const std:
   d_near = std::max(d_near, 1e-6);
   spdlog::debug("depth: search range [{:.3f}, {:.3f}] m, {} neighbours", d_near, d_far, pairs.size());
 
-  const cv::Mat grad = GradientMagnitude(reference.image);
+  const cv::Mat grad = o.gradient_peak_fraction > 0 ? GradientPeaks(reference.image, o.gradient_peak_fraction)
+                                                   : GradientMagnitude(reference.image);
   const FloatImage ref_grey_px(ref_prepared->grey);
   const int rows = reference.image.rows;
   std::atomic<long long> num_edge{0};

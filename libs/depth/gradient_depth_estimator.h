@@ -95,6 +95,13 @@ struct GradientDepthOptions {
   // miss V itself, 3.8 % miss it grown by a quarter (docs/benchmarks.md,
   // "Edge pixels whose ray misses V").
   double ray_margin = 0.25;
+  // Only edge pixels whose ‖∇I‖ is at least this fraction of the larger of
+  // their two neighbours' along the gradient direction (quantised to the 8
+  // neighbours) get a depth (ours, for speed; 1: Canny's non-maximum
+  // suppression; 0: every edge pixel, the paper). On texture at the pixel
+  // scale most pixels pass g; those beside a maximum carry less information
+  // on depth, and the propagation (§4.2) fills them.
+  double gradient_peak_fraction = 0.0;
 
   void Check() const;
 };
@@ -152,5 +159,10 @@ void PrepareViewImage(ViewImage* view, const GradientDepthOptions& options);
 
 // Grey-level gradient magnitude ‖∇I‖ per pixel (CV_32F), as the estimator thresholds it.
 cv::Mat GradientMagnitude(const cv::Mat& image_bgr);
+
+// GradientMagnitude with 0 at every pixel below `fraction` of the larger of
+// its two neighbours along its gradient direction (see
+// GradientDepthOptions::gradient_peak_fraction).
+cv::Mat GradientPeaks(const cv::Mat& image_bgr, double fraction);
 
 }  // namespace lfrecon

@@ -23,7 +23,8 @@
 //   of the camera over the N frames (0: the scene's default, one turn).
 // --consistency V,RHO,R (pipeline mode): PropagationOptions::consistency views,
 //   rho_min, patch_radius_px (V = 0: no check); --max-frame-gap N: StreamingDepthOptions::max_frame_gap;
-//   --ray-margin M: GradientDepthOptions::ray_margin (negative: every edge pixel gets a depth).
+//   --ray-margin M: GradientDepthOptions::ray_margin (negative: every edge pixel gets a depth);
+//   --peak-fraction F: GradientDepthOptions::gradient_peak_fraction (1: only gradient maxima get a depth).
 // --view-stride K (pipeline mode): PipelineOptions::views = 0, K, 2K, ... (`lfrecon run --views
 //   0:N:K`): only those views get depth maps and are fused; every frame is still read and
 //   serves as a neighbour (hierarchy, photoconsistency). At 3000 frames a loop (0.12°) K = 5
@@ -244,7 +245,7 @@ int main(int argc, char** argv) {
   std::string mode = "exact", scene = "tabletop", mesh_out, frames_dir;
   DenseConsistencyOptions consistency;
   int max_frame_gap = StreamingDepthOptions{}.max_frame_gap;
-  std::optional<double> ray_margin;
+  std::optional<double> ray_margin, peak_fraction;
   int frames = 3000, width = 1280, height = 720, divisions = 256, report_every = 250, threads = 0, max_block = 16;
   int view_stride = 1;
   double loops = 0, budget_mib = 1024;
@@ -280,6 +281,7 @@ int main(int argc, char** argv) {
       std::sscanf(value().c_str(), "%d,%lf,%d", &consistency.views, &consistency.rho_min,
                   &consistency.patch_radius_px);
     } else if (k == "--ray-margin") ray_margin = std::atof(value().c_str());  // negative: every edge pixel
+    else if (k == "--peak-fraction") peak_fraction = std::atof(value().c_str());
     else if (k == "--max-frame-gap") max_frame_gap = std::atoi(value().c_str());
     else if (k == "--no-compact") compact = false;
     else if (k == "--view-stride") view_stride = std::atoi(value().c_str());
@@ -425,6 +427,7 @@ int main(int argc, char** argv) {
   po.propagation.consistency = consistency;
   po.depth.max_frame_gap = max_frame_gap;
   if (ray_margin) po.depth.gradient.ray_margin = *ray_margin;
+  if (peak_fraction) po.depth.gradient.gradient_peak_fraction = *peak_fraction;
   po.write_vdb = false;
   po.write_turntable = false;
   po.fusion.store_budget_bytes = budget;

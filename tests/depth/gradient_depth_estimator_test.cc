@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <opencv2/imgproc.hpp>
 
 #include "synth_views.h"
 #include "util/error.h"
@@ -81,6 +82,58 @@ TEST(GradientDepthEstimator, EdgePixelsWhoseRayMissesTheGrownVolumeGetNoDepthAnd
   ASSERT_GT(outside_with_depth, 1000);
   EXPECT_EQ(mismatched, 0);
   EXPECT_EQ(leaked, 0);
+}
+
+TEST(GradientPeaks, KeepsTheFlanksOfALineAndAtZeroEverything) {
+  // A bright vertical line one pixel wide at column 20, blurred (σ 1 px): ‖∇I‖
+  // peaks on its two flanks (columns 19 and 21) and vanishes on the line.
+  cv::Mat img = cv::Mat::zeros(40, 48, CV_32FC3);
+  img.col(20).setTo(cv::Scalar(1, 1, 1));
+  cv::GaussianBlur(img, img, cv::Size(0, 0), 1.0);
+  const cv::Mat mag = GradientMagnitude(img);
+  const cv::Mat peaks = GradientPeaks(img, 1.0);
+  for (int r = 5; r < 35; ++r)
+    for (int c = 0; c < img.cols; ++c) {
+      const bool flank = c == 19 || c == 21;
+      EXPECT_EQ(peaks.at<float>(r, c) > 0, flank) << r << " " << c;
+      if (flank) EXPECT_EQ(peaks.at<float>(r, c), mag.at<float>(r, c));
+    }
+  // Half of the neighbour's: the pixels beside the flanks that still have half the slope.
+  const cv::Mat half = GradientPeaks(img, 0.5);
+  EXPECT_GT(cv::countNonZero(half), cv::countNonZero(peaks));
+  const cv::Mat all = GradientPeaks(img, 0.0);
+  EXPECT_EQ(cv::countNonZero(all != mag), 0);
+}
+
+TEST(GradientDepthEstimator, PeakFractionKeepsTheDepthsOfThePeaksBitForBit) {
+  // gradient_peak_fraction only chooses which edge pixels get a depth: those
+  // it keeps get exactly the depth and confidence of the full estimate.
+  const auto v = MakeSynthViews("plane", 60, 5.0, 320, 180, 120);
+  GradientDepthOptions every;
+  every.gradient_peak_fraction = 0;
+  GradientDepthOptions peaks;
+  peaks.gradient_peak_fraction = 1;
+  const DepthMap all = GradientDepthEstimator(every).Estimate(v.ref, v.NeighborPtrs(), v.volume);
+  const DepthMap some = GradientDepthEstimator(peaks).Estimate(v.ref, v.NeighborPtrs(), v.volume);
+  const cv::Mat kept = GradientPeaks(v.ref.image, 1.0);
+  long long with_all = 0, with_some = 0, mismatched = 0, leaked = 0;
+  for (int r = 0; r < all.depth.rows; ++r)
+    for (int c = 0; c < all.depth.cols; ++c) {
+      const float a = all.depth.at<float>(r, c), b = some.depth.at<float>(r, c);
+      with_all += a > 0;
+      with_some += b > 0;
+      if (kept.at<float>(r, c) > every.gradient_threshold)
+        mismatched += a != b || all.confidence.at<float>(r, c) != some.confidence.at<float>(r, c);
+      else
+        leaked += b > 0;
+    }
+  std::printf("depths: every edge pixel %lld, peaks only %lld\n", with_all, with_some);
+  EXPECT_EQ(mismatched, 0);
+  EXPECT_EQ(leaked, 0);
+  EXPECT_LT(with_some, 0.7 * with_all);
+  EXPECT_GT(with_some, 0.2 * with_all);
+  const auto s = ScoreDepth(v, some, /*skip_edges=*/true);
+  EXPECT_GE(s.Accuracy(), 0.95);
 }
 
 TEST(GradientDepthEstimator, HierarchyBeatsNearestNeighboursOnly) {
@@ -270,6 +323,9 @@ TEST(GradientDepthEstimatorOptions, CheckRejectsBadValues) {
   o.level_min_step_deg = -1;
   EXPECT_THROW(o.Check(), OptionError);
   o.level_min_step_deg = o.max_view_angle_deg;
+  EXPECT_THROW(o.Check(), OptionError);
+  o = GradientDepthOptions();
+  o.gradient_peak_fraction = 1.5;
   EXPECT_THROW(o.Check(), OptionError);
 }
 
