@@ -4,11 +4,13 @@
 
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
+#include <tbb/task_group.h>
 
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <fstream>
+#include <functional>
 #include <map>
 #include <set>
 
@@ -137,19 +139,39 @@ DepthMap DensifyNeighbourByNeighbour(const DepthPropagator& propagator, const Vi
       usable.push_back(w);
       views.push_back(&w->tapped.view);
     }
+  // Neighbour k + 1's frame is made (one thread: expansion and pre-smoothing)
+  // while neighbour k is added (every thread), in the same order.
+  auto for_each_frame = [&](const std::vector<int>& order, const std::function<void(const ViewImage&)>& add) {
+    auto make = [&](std::size_t k) {
+      return MaterializeWindowFrame(*usable[static_cast<std::size_t>(order[k])], go, options.photo, false);
+    };
+    ViewImage next;
+    if (!order.empty()) next = make(0);
+    for (std::size_t k = 0; k < order.size(); ++k) {
+      const ViewImage current = std::move(next);
+      next = ViewImage();
+      tbb::task_group making;
+      if (k + 1 < order.size()) making.run([&, k] { next = make(k + 1); });
+      try {
+        add(current);
+      } catch (...) {
+        making.wait();
+        throw;
+      }
+      making.wait();
+    }
+  };
   const BidirectionalPhotoconsistency photo(options.photo);
   PhotoconsistencyAccumulator acc(options.photo);
   acc.Begin(reference, labelled);
-  for (int j : photo.SelectNeighbors(reference.view, views))
-    acc.Add(MaterializeWindowFrame(*usable[static_cast<std::size_t>(j)], go, options.photo, false));
+  for_each_frame(photo.SelectNeighbors(reference.view, views), [&](const ViewImage& v) { acc.Add(v); });
   const EdgeConsistency edges = acc.Finish();
   if (edge_classes) *edge_classes = edges.Classify(options.photo.silhouette_ratio);
   DepthMap dense = propagator.Filter(reference.image, propagator.Splat(labelled, edges));
   if (options.consistency.views > 0) {  // second pass, again one neighbour at a time
     DenseConsistencyAccumulator check(options.consistency);
     check.Begin(reference, dense, labelled.depth);
-    for (int j : check.SelectNeighbors(reference.view, views))
-      check.Add(MaterializeWindowFrame(*usable[static_cast<std::size_t>(j)], go, options.photo, false));
+    for_each_frame(check.SelectNeighbors(reference.view, views), [&](const ViewImage& v) { check.Add(v); });
     ApplyDenseConsistency(check.Finish(), options.consistency.rho_min, &dense);
   }
   return dense;

@@ -299,7 +299,8 @@ void PhotoconsistencyAccumulator::AddPixel(std::size_t i, const Neighbor& nb) {
       const float t = first + static_cast<float>(k);
       const float yx = y0[0] + t * dy[0], yy = y0[1] + t * dy[1], yz = y0[2] + t * dy[2];
       if (!(yz > 0)) return false;
-      const float fx = yx / yz - 0.5f, fy = yy / yz - 0.5f;
+      const float inv_z = 1.0f / yz;  // one division per sample (as the AVX2 path)
+      const float fx = yx * inv_z - 0.5f, fy = yy * inv_z - 0.5f;
       if (!(fx >= 0.0f && fy >= 0.0f && fx < nb.max_x && fy < nb.max_y)) return false;
       const int x0 = static_cast<int>(fx), y0i = static_cast<int>(fy);
       const float ax = fx - static_cast<float>(x0), ay = fy - static_cast<float>(y0i);
@@ -400,7 +401,8 @@ LFRECON_AVX2 inline __m256 SsdAlong8(const float* data, int stride_floats, float
     const __m256 yy = _mm256_add_ps(y0[1], _mm256_mul_ps(t, dy[1]));
     const __m256 yz = _mm256_add_ps(y0[2], _mm256_mul_ps(t, dy[2]));
     ok = _mm256_and_ps(ok, _mm256_cmp_ps(yz, zero, _CMP_GT_OQ));
-    __m256 fx = _mm256_sub_ps(_mm256_div_ps(yx, yz), half), fy = _mm256_sub_ps(_mm256_div_ps(yy, yz), half);
+    const __m256 inv_z = _mm256_div_ps(_mm256_set1_ps(1.0f), yz);
+    __m256 fx = _mm256_sub_ps(_mm256_mul_ps(yx, inv_z), half), fy = _mm256_sub_ps(_mm256_mul_ps(yy, inv_z), half);
     ok = _mm256_and_ps(ok, _mm256_and_ps(_mm256_and_ps(_mm256_cmp_ps(fx, zero, _CMP_GE_OQ),
                                                        _mm256_cmp_ps(fy, zero, _CMP_GE_OQ)),
                                          _mm256_and_ps(_mm256_cmp_ps(fx, max_x, _CMP_LT_OQ),
