@@ -118,22 +118,27 @@ void PrepareViewImage(ViewImage* view, const GradientDepthOptions& options) {
   cv::cvtColor(view->smoothed, view->grey, cv::COLOR_BGR2GRAY);
 }
 
-cv::Mat GradientMagnitude(const cv::Mat& image_bgr) {
-  cv::Mat grey, gx, gy, mag;
+namespace {
+// Grey-level derivatives and ‖∇I‖ as the estimator thresholds them.
+void GreyGradient(const cv::Mat& image_bgr, cv::Mat* gx, cv::Mat* gy, cv::Mat* mag) {
+  cv::Mat grey;
   cv::cvtColor(image_bgr, grey, cv::COLOR_BGR2GRAY);
   // 3x3 Sobel / 8 = smoothed central difference per pixel.
-  cv::Sobel(grey, gx, CV_32F, 1, 0, 3, 1.0 / 8.0);
-  cv::Sobel(grey, gy, CV_32F, 0, 1, 3, 1.0 / 8.0);
-  cv::magnitude(gx, gy, mag);
+  cv::Sobel(grey, *gx, CV_32F, 1, 0, 3, 1.0 / 8.0);
+  cv::Sobel(grey, *gy, CV_32F, 0, 1, 3, 1.0 / 8.0);
+  cv::magnitude(*gx, *gy, *mag);
+}
+}  // namespace
+
+cv::Mat GradientMagnitude(const cv::Mat& image_bgr) {
+  cv::Mat gx, gy, mag;
+  GreyGradient(image_bgr, &gx, &gy, &mag);
   return mag;
 }
 
 cv::Mat GradientPeaks(const cv::Mat& image_bgr, double fraction) {
-  cv::Mat grey, gx, gy, mag;
-  cv::cvtColor(image_bgr, grey, cv::COLOR_BGR2GRAY);
-  cv::Sobel(grey, gx, CV_32F, 1, 0, 3, 1.0 / 8.0);
-  cv::Sobel(grey, gy, CV_32F, 0, 1, 3, 1.0 / 8.0);
-  cv::magnitude(gx, gy, mag);
+  cv::Mat gx, gy, mag;
+  GreyGradient(image_bgr, &gx, &gy, &mag);
   cv::Mat out = cv::Mat::zeros(mag.size(), CV_32F);
   const int rows = mag.rows, cols = mag.cols;
   const float tan22 = 0.41421356f;  // tan 22.5°
