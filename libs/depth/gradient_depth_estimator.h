@@ -102,6 +102,18 @@ struct GradientDepthOptions {
   // scale most pixels pass g; those beside a maximum carry less information
   // on depth, and the propagation (§4.2) fills them.
   double gradient_peak_fraction = 0.0;
+  // Levels stop for a pixel once its depth is settled outside V (ours, for
+  // speed): when every depth whose match in the view just used lies within
+  // outlier_pixels of the current one's is a point outside V. A later level
+  // only accepts a match within outlier_pixels of the prediction, in a view
+  // farther than this one, so the remaining levels would only refine a depth
+  // that stays outside V. Its label stays background; the depth and the
+  // confidence come from the views used so far, so they are coarser (they
+  // still feed photo-consistency and the fusion's free space, where a
+  // background depth only has to lie beyond the object). Labels changed on
+  // < 0.01 % of pixels, sparse depth ~40 % faster (docs/benchmarks.md,
+  // "Levels stop outside V"). false: every level for every pixel (the paper).
+  bool settle_outside_volume = true;
 
   void Check() const;
 };

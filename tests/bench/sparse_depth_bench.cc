@@ -7,6 +7,7 @@
 // --out: writes DIR/sparse_NNNN.bin per view (rows, cols, then depth and
 // confidence as float32 and the label as uint8, row-major).
 // --ray-stats: how many depths lie on rays that miss V (grown by 0-50 %).
+// --every-level: settle_outside_volume off (every level for every pixel).
 // --ref: compares each view with DIR/sparse_NNNN.bin from an earlier run:
 // pixels whose depth, confidence or label differ, max |Δdepth| (absolute and
 // relative) and max |Δconfidence|; exit status 1 when a map is missing.
@@ -98,6 +99,7 @@ int main(int argc, char** argv) {
   int threads = 1, repeat = 1;
   std::string out_dir, ref_dir;
   bool ray_stats = false;
+  bool every_level = false;
   for (int a = 2; a < argc; ++a) {
     if (!std::strcmp(argv[a], "--views") && a + 1 < argc) {
       wanted.clear();
@@ -114,6 +116,8 @@ int main(int argc, char** argv) {
       ref_dir = argv[++a];
     } else if (!std::strcmp(argv[a], "--ray-stats")) {
       ray_stats = true;
+    } else if (!std::strcmp(argv[a], "--every-level")) {
+      every_level = true;
     } else {
       std::fprintf(stderr, "unknown or incomplete option %s\n", argv[a]);
       return 2;
@@ -122,7 +126,8 @@ int main(int argc, char** argv) {
   spdlog::set_level(spdlog::level::warn);
   tbb::global_control control(tbb::global_control::max_allowed_parallelism, threads);
   const Dataset ds = Dataset::Open(dopt);
-  const GradientDepthOptions options;
+  GradientDepthOptions options;
+  options.settle_outside_volume = !every_level;
   std::vector<PinholeView> views;
   for (int i = 0; i < ds.NumViews(); ++i) views.push_back(ds.View(i));
   const std::vector<char> grid = HierarchyGrid(views, options);

@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
 #include <opencv2/imgproc.hpp>
 
 #include "synth_views.h"
@@ -134,6 +135,55 @@ TEST(GradientDepthEstimator, PeakFractionKeepsTheDepthsOfThePeaksBitForBit) {
   EXPECT_GT(with_some, 0.2 * with_all);
   const auto s = ScoreDepth(v, some, /*skip_edges=*/true);
   EXPECT_GE(s.Accuracy(), 0.95);
+}
+
+TEST(GradientDepthEstimator, SettlingOutsideVKeepsLabelsAndForegroundDepths) {
+  // The tabletop: objects in V on a textured floor that reaches far outside
+  // it. Stopping the levels of a pixel once its depth is settled outside V
+  // changes only background depths (coarser: fewer views), never a label
+  // beyond a handful of pixels, and leaves foreground depths as they were.
+  const auto v = MakeSynthViews("tabletop");
+  GradientDepthOptions every;
+  every.settle_outside_volume = false;
+  GradientDepthOptions settle;
+  settle.settle_outside_volume = true;
+  const DepthMap all = GradientDepthEstimator(every).Estimate(v.ref, v.NeighborPtrs(), v.volume);
+  const DepthMap some = GradientDepthEstimator(settle).Estimate(v.ref, v.NeighborPtrs(), v.volume);
+  const auto fg = static_cast<std::uint8_t>(DepthLabel::kForeground);
+  long long valid = 0, label_changed = 0, foreground = 0, foreground_changed = 0, background = 0,
+            background_changed = 0;
+  for (int r = 0; r < all.depth.rows; ++r)
+    for (int c = 0; c < all.depth.cols; ++c) {
+      const float a = all.depth.at<float>(r, c), b = some.depth.at<float>(r, c);
+      if (!(a > 0) && !(b > 0)) continue;
+      ++valid;
+      const std::uint8_t la = all.label.at<std::uint8_t>(r, c), lb = some.label.at<std::uint8_t>(r, c);
+      if ((a > 0) != (b > 0) || la != lb) {
+        ++label_changed;
+        continue;
+      }
+      const bool changed = a != b || all.confidence.at<float>(r, c) != some.confidence.at<float>(r, c);
+      if (la == fg) {
+        ++foreground;
+        foreground_changed += changed;
+      } else {
+        ++background;
+        background_changed += changed;
+      }
+    }
+  std::printf("depths %lld: label or validity changed %lld; foreground %lld (%lld changed), background %lld (%lld "
+              "changed)\n",
+              valid, label_changed, foreground, foreground_changed, background, background_changed);
+  ASSERT_GT(foreground, 1000);
+  ASSERT_GT(background, 1000);
+  EXPECT_LE(label_changed, 0.001 * valid);
+  EXPECT_LE(foreground_changed, 0.001 * foreground);
+  // It does stop early: most background pixels end with fewer views.
+  EXPECT_GE(background_changed, 0.5 * background);
+  // Foreground accuracy against the truth is that of every level.
+  const auto sa = ScoreDepth(v, all, /*skip_edges=*/true), ss = ScoreDepth(v, some, /*skip_edges=*/true);
+  EXPECT_NEAR(ss.Accuracy(), sa.Accuracy(), 0.002);
+  EXPECT_NEAR(ss.Coverage(), sa.Coverage(), 0.002);
 }
 
 TEST(GradientDepthEstimator, HierarchyBeatsNearestNeighboursOnly) {
