@@ -501,25 +501,6 @@ class PixelSolver {
   bool avx2_ = false;  // four samples of a patch row at once (bit-identical)
 };
 
-// The planar depths [d_in, d_out] at which origin + d·dir lies in `box` (slab
-// method); d_in > d_out when it never does.
-void RayDepthsInBox(const Eigen::Vector3d& origin, const Eigen::Vector3d& dir, const BoundingBox& box, double* d_in,
-                    double* d_out) {
-  double t0 = 0, t1 = std::numeric_limits<double>::infinity();
-  for (int a = 0; a < 3; ++a) {
-    if (std::abs(dir[a]) < 1e-15) {
-      if (origin[a] < box.min[a] || origin[a] > box.max[a]) t0 = 1, t1 = 0;
-      continue;
-    }
-    double ta = (box.min[a] - origin[a]) / dir[a], tb = (box.max[a] - origin[a]) / dir[a];
-    if (ta > tb) std::swap(ta, tb);
-    t0 = std::max(t0, ta);
-    t1 = std::min(t1, tb);
-  }
-  *d_in = t0;
-  *d_out = t1;
-}
-
 // The per-pixel work of Estimate over rows [begin, end); returns the number of
 // edge pixels. Built twice where the compiler can (GCC on x86-64, no
 // sanitizer): for AVX2 and for the baseline x86-64, the copy chosen at run time
@@ -579,9 +560,10 @@ LFRECON_DEPTH_CLONES long long EstimateRows(const RowJob& job, int begin, int en
       if (job.ray_box && !RayMeetsBox(centre, vi.Unproject(p, 1.0) - centre, *job.ray_box)) continue;
       ++num_edge;
       const Eigen::Vector3d ph(p.x(), p.y(), 1.0);
-      // Planar depths at which this pixel's ray is inside V (empty: never).
+      // Planar depths at which this pixel's ray is inside V (the ray's
+      // parameter: dir reaches planar depth 1); empty when it never is.
       double v_in = 1, v_out = 0;
-      if (o.settle_outside_volume) RayDepthsInBox(centre, vi.Unproject(p, 1.0) - centre, volume, &v_in, &v_out);
+      if (o.settle_outside_volume) RayBoxInterval(centre, vi.Unproject(p, 1.0) - centre, volume, &v_in, &v_out);
       const float* srow = job.ref_smoothed.ptr<float>(r);
       const Eigen::Vector3f colour(srow[3 * c], srow[3 * c + 1], srow[3 * c + 2]);
       PixelSolver solver(o, ref_grey_px, colour);

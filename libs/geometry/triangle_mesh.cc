@@ -48,20 +48,27 @@ void TriangleMesh::Bounds(Eigen::Vector3f* min, Eigen::Vector3f* max) const {
   }
 }
 
-bool RayMeetsBox(const Eigen::Vector3d& origin, const Eigen::Vector3d& dir, const BoundingBox& box) {
+bool RayBoxInterval(const Eigen::Vector3d& origin, const Eigen::Vector3d& dir, const BoundingBox& box, double* t_in,
+                    double* t_out) {
   double t0 = 0, t1 = std::numeric_limits<double>::infinity();
   for (int a = 0; a < 3; ++a) {
     if (std::abs(dir[a]) < 1e-15) {
-      if (origin[a] < box.min[a] || origin[a] > box.max[a]) return false;
+      if (origin[a] < box.min[a] || origin[a] > box.max[a]) t0 = 1, t1 = 0;
       continue;
     }
     double ta = (box.min[a] - origin[a]) / dir[a], tb = (box.max[a] - origin[a]) / dir[a];
     if (ta > tb) std::swap(ta, tb);
     t0 = std::max(t0, ta);
     t1 = std::min(t1, tb);
-    if (t0 > t1) return false;
   }
-  return true;
+  *t_in = t0;
+  *t_out = t1;
+  return t0 <= t1;
+}
+
+bool RayMeetsBox(const Eigen::Vector3d& origin, const Eigen::Vector3d& dir, const BoundingBox& box) {
+  double t0, t1;
+  return RayBoxInterval(origin, dir, box, &t0, &t1);
 }
 
 }  // namespace lfrecon

@@ -69,7 +69,12 @@ inline Eigen::Vector3d ClosestPointOnTriangle(const Eigen::Vector3d& p, const Ei
   return a + ab * (vb * denom) + ac * (vc * denom);
 }
 
-// Does the ray from `origin` along `dir` meet `box` (at a parameter >= 0)? Slab test.
+// The parameters [*t_in, *t_out] (t >= 0) at which origin + t·dir lies in
+// `box` (slab method); false, with *t_in > *t_out, when it never does.
+bool RayBoxInterval(const Eigen::Vector3d& origin, const Eigen::Vector3d& dir, const BoundingBox& box, double* t_in,
+                    double* t_out);
+
+// Does the ray from `origin` along `dir` meet `box` (at a parameter >= 0)?
 bool RayMeetsBox(const Eigen::Vector3d& origin, const Eigen::Vector3d& dir, const BoundingBox& box);
 
 }  // namespace lfrecon

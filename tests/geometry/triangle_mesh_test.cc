@@ -18,5 +18,30 @@ TEST(BoundingBox, RayMeetsBox) {
   EXPECT_TRUE(RayMeetsBox(o, Eigen::Vector3d(0.3, 0, 1), box.Grown(0.3)));             // x = 1.2 <= 1.3 at z = 4
 }
 
+TEST(BoundingBox, RayBoxInterval) {
+  BoundingBox box;
+  box.min = Eigen::Vector3d(-1, -1, 4);
+  box.max = Eigen::Vector3d(1, 1, 6);
+  const Eigen::Vector3d o = Eigen::Vector3d::Zero();
+  double t0 = 0, t1 = 0;
+  ASSERT_TRUE(RayBoxInterval(o, Eigen::Vector3d(0, 0, 2), box, &t0, &t1));
+  EXPECT_DOUBLE_EQ(t0, 2.0);
+  EXPECT_DOUBLE_EQ(t1, 3.0);
+  // Through the side: enters at z = 4, leaves at x = 1, z = 1 / 0.19.
+  ASSERT_TRUE(RayBoxInterval(o, Eigen::Vector3d(0.19, 0, 1), box, &t0, &t1));
+  EXPECT_DOUBLE_EQ(t0, 4.0);
+  EXPECT_NEAR(t1, 1 / 0.19, 1e-12);
+  // Starting inside: from 0.
+  ASSERT_TRUE(RayBoxInterval(Eigen::Vector3d(0, 0, 5), Eigen::Vector3d(1, 0, 0), box, &t0, &t1));
+  EXPECT_EQ(t0, 0.0);
+  EXPECT_DOUBLE_EQ(t1, 1.0);
+  EXPECT_FALSE(RayBoxInterval(o, Eigen::Vector3d(0.3, 0, 1), box, &t0, &t1));
+  EXPECT_GT(t0, t1);
+  EXPECT_FALSE(RayBoxInterval(o, Eigen::Vector3d(0, 0, -1), box, &t0, &t1));
+  EXPECT_GT(t0, t1);
+  EXPECT_FALSE(RayBoxInterval(Eigen::Vector3d(2, 0, 0), Eigen::Vector3d(0, 0, 1), box, &t0, &t1));  // parallel, beside
+  EXPECT_GT(t0, t1);
+}
+
 }  // namespace
 }  // namespace lfrecon
