@@ -563,7 +563,10 @@ LFRECON_DEPTH_CLONES long long EstimateRows(const RowJob& job, int begin, int en
       // Planar depths at which this pixel's ray is inside V (the ray's
       // parameter: dir reaches planar depth 1); empty when it never is.
       double v_in = 1, v_out = 0;
-      if (o.settle_outside_volume) RayBoxInterval(centre, vi.Unproject(p, 1.0) - centre, volume, &v_in, &v_out);
+      if (o.settle_outside_volume && !RayBoxInterval(centre, vi.Unproject(p, 1.0) - centre, volume, &v_in, &v_out)) {
+        v_in = std::numeric_limits<double>::infinity();  // never in V: settled at its first match
+        v_out = -v_in;
+      }
       const float* srow = job.ref_smoothed.ptr<float>(r);
       const Eigen::Vector3f colour(srow[3 * c], srow[3 * c + 1], srow[3 * c + 2]);
       PixelSolver solver(o, ref_grey_px, colour);

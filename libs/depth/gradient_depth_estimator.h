@@ -107,7 +107,8 @@ struct GradientDepthOptions {
   // outlier_pixels of the current one's is a point outside V. A later level
   // only accepts a match within outlier_pixels of the prediction, in a view
   // farther than this one, so the remaining levels would only refine a depth
-  // that stays outside V. Its label stays background; the depth and the
+  // that stays outside V (a pixel whose ray misses V, inside ray_margin:
+  // at its first match). Its label stays background; the depth and the
   // confidence come from the views used so far, so they are coarser (they
   // still feed photo-consistency and the fusion's free space, where a
   // background depth only has to lie beyond the object). Labels changed on
