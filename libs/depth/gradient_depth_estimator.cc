@@ -557,13 +557,14 @@ LFRECON_DEPTH_CLONES long long EstimateRows(const RowJob& job, int begin, int en
     for (int c = 0; c < cols; ++c) {
       if (!(grow[c] > o.gradient_threshold)) continue;
       const Eigen::Vector2d p(c + 0.5, r + 0.5);
-      if (job.ray_box && !RayMeetsBox(centre, vi.Unproject(p, 1.0) - centre, *job.ray_box)) continue;
+      // The pixel's ray; its parameter is the planar depth (dir reaches depth 1).
+      const Eigen::Vector3d dir = vi.Unproject(p, 1.0) - centre;
+      if (job.ray_box && !RayMeetsBox(centre, dir, *job.ray_box)) continue;
       ++num_edge;
       const Eigen::Vector3d ph(p.x(), p.y(), 1.0);
-      // Planar depths at which this pixel's ray is inside V (the ray's
-      // parameter: dir reaches planar depth 1); empty when it never is.
+      // Planar depths at which this pixel's ray is inside V; empty when it never is.
       double v_in = 1, v_out = 0;
-      if (o.settle_outside_volume && !RayBoxInterval(centre, vi.Unproject(p, 1.0) - centre, volume, &v_in, &v_out)) {
+      if (o.settle_outside_volume && !RayBoxInterval(centre, dir, volume, &v_in, &v_out)) {
         v_in = std::numeric_limits<double>::infinity();  // never in V: settled at its first match
         v_out = -v_in;
       }
