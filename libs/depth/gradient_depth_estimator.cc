@@ -360,54 +360,75 @@ class PixelSolver {
     }
   }
 
+  // The reference side of the patch at line coordinate s (reference depth d =
+  // D(s)): the points of I_i that the plane fronto-parallel to i at depth d
+  // maps onto the `rows` rows of I_j's patch, sampled into si[rows][L]. False
+  // if any lies behind i or outside I_i.
+  bool ReferencePatch(const EpipolarRay& ray, double s, double d, int rows, float* si) const {
+    const int L = 2 * half_ + 1;
+    // The plane homography maps each segment on (or beside) ℓ to a segment in
+    // I_i: map its start and direction once, then step (homogeneous coordinates).
+    const Eigen::Vector3d step = ray.BackToReferenceH(Eigen::Vector3d(ray.u.x(), ray.u.y(), 0.0), d);
+    const int half_rows = rows / 2;
+    for (int row = -half_rows; row <= half_rows; ++row, si += L) {
+      const Eigen::Vector2d y0 = ray.Point(s - half_) + row * ray.n;
+      const Eigen::Vector3d base = ray.BackToReferenceH(Eigen::Vector3d(y0.x(), y0.y(), 1.0), d);
+      int k = 0;
+#ifdef LFRECON_DEPTH_AVX2
+      if (avx2_)
+        for (; k + 4 <= L; k += 4)
+          if (!SampleProjective4(ref_grey_, base, step, k, si + k)) return false;
+#endif
+      for (; k < L; ++k) {
+        const Eigen::Vector3d xh = base + k * step;
+        if (!(xh.z() > 0)) return false;
+        const double inv_z = 1.0 / xh.z();
+        if (!ref_grey_.Sample1(xh.x() * inv_z, xh.y() * inv_z, &si[k])) return false;
+      }
+    }
+    return true;
+  }
+
   // The 2×5 patch at line coordinate s (reference depth D(s)) and its least-squares shift.
   // line: when given (rows = 1 only), I_j's samples on ℓ from SampleLine starting at s.
   // with_colour: false leaves m.log_colour unset (the match's position is still
   // checked, so validity does not depend on it); Search samples it once at the final match.
+  // ref_rows: when given, the reference side (ReferencePatch's si, `rows` rows)
+  // to use instead of sampling it at D(s).
   ShiftMeasurement Measure(const EpipolarRay& ray, double s, int rows, const float* line = nullptr,
-                           bool with_colour = true) const {
+                           bool with_colour = true, const float* ref_rows = nullptr) const {
     ShiftMeasurement m;
     const double d = ray.Depth(s);
     if (!(d > 0) || !ray.InFront(d)) return m;
     const FloatImage& img_j = ray.pair->image_px;
     const FloatImage& grey_j = ray.pair->grey_px;
     const int L = 2 * half_ + 1;
-    // The plane homography maps each segment on (or beside) ℓ to a segment in
-    // I_i: map its start and direction once, then step (homogeneous coordinates).
-    const Eigen::Vector3d step = ray.BackToReferenceH(Eigen::Vector3d(ray.u.x(), ray.u.y(), 0.0), d);
+    float si_rows[5 * 9];
+    if (!ref_rows) {
+      if (!ReferencePatch(ray, s, d, rows, si_rows)) return m;
+      ref_rows = si_rows;
+    }
     double sxy = 0, sxx = 0;
-    float sj[9], si[9];
+    float sj[9];
     const int half_rows = rows / 2;
     for (int row = -half_rows; row <= half_rows; ++row) {
+      const float* si = ref_rows + (row + half_rows) * L;
       const Eigen::Vector2d y0 = ray.Point(s - half_) + row * ray.n;
-      const Eigen::Vector3d base = ray.BackToReferenceH(Eigen::Vector3d(y0.x(), y0.y(), 1.0), d);
       int k = 0;
-#ifdef LFRECON_DEPTH_AVX2
-      if (avx2_)
-        for (; k + 4 <= L; k += 4) {
-          if (line) {
-            for (int q = k; q < k + 4; ++q) {
-              sj[q] = line[q];
-              if (std::isnan(sj[q])) return m;
-            }
-          } else if (!SampleSegment4(grey_j, y0, ray.u, k, sj + k)) {
-            return m;
-          }
-          if (!SampleProjective4(ref_grey_, base, step, k, si + k)) return m;
-        }
-#endif
-      for (; k < L; ++k) {
-        if (line) {
+      if (line) {
+        for (; k < L; ++k) {
           sj[k] = line[k];
           if (std::isnan(sj[k])) return m;
-        } else {
-          const Eigen::Vector2d y = y0 + k * ray.u;
-          if (!grey_j.Sample1(y.x(), y.y(), &sj[k])) return m;
         }
-        const Eigen::Vector3d xh = base + k * step;
-        if (!(xh.z() > 0)) return m;
-        const double inv_z = 1.0 / xh.z();
-        if (!ref_grey_.Sample1(xh.x() * inv_z, xh.y() * inv_z, &si[k])) return m;
+      }
+#ifdef LFRECON_DEPTH_AVX2
+      if (avx2_)
+        for (; k + 4 <= L; k += 4)
+          if (!SampleSegment4(grey_j, y0, ray.u, k, sj + k)) return m;
+#endif
+      for (; k < L; ++k) {
+        const Eigen::Vector2d y = y0 + k * ray.u;
+        if (!grey_j.Sample1(y.x(), y.y(), &sj[k])) return m;
       }
       // Least-squares shift over the interior columns: eq. 2-3 in robust form,
       // gx the patch gradient along ℓ, gy the difference between its rows.
@@ -445,11 +466,21 @@ class PixelSolver {
                 std::vector<float>* line) const {
     double best_c = -std::numeric_limits<double>::infinity(), best_s = std::numeric_limits<double>::quiet_NaN();
     ShiftMeasurement best;
+    // The reference side of every patch of this search, sampled once at the
+    // middle reference point's depth (reuse_reference_patch).
+    const int L = 2 * half_ + 1;
+    float ref[5 * 9];
+    const float* ref_rows = nullptr;
+    if (o_.reuse_reference_patch) {
+      const double s_mid = s0 + 0.5 * (count - 1), d_mid = ray.Depth(s_mid);
+      if (d_mid > 0 && ray.InFront(d_mid) && ReferencePatch(ray, s_mid, d_mid, o_.patch_rows, ref)) ref_rows = ref;
+    }
+    const float* ref_middle = ref_rows ? ref_rows + (o_.patch_rows / 2) * L : nullptr;
     // Choosing the reference point needs only the 2×5 patch on ℓ itself.
     SampleLine(ray, s0, count, line);
     for (int k = 0; k < count; ++k) {
       const double s = s0 + k;
-      const ShiftMeasurement m = Measure(ray, s, 1, line->data() + k);
+      const ShiftMeasurement m = Measure(ray, s, 1, line->data() + k, true, ref_middle);
       if (!m.valid || std::abs(m.shift) > 2.0) continue;
       const double c = m.LogScore();
       if (c > best_c) {
@@ -464,7 +495,7 @@ class PixelSolver {
     double s = best_s + best.shift;
     bool moved = false;
     for (int it = 0; it < o_.shift_iterations; ++it) {
-      const ShiftMeasurement m = Measure(ray, s, o_.patch_rows, nullptr, false);
+      const ShiftMeasurement m = Measure(ray, s, o_.patch_rows, nullptr, false, ref_rows);
       if (!m.valid || std::abs(m.shift) > 1.0) break;
       best = m;
       moved = true;

@@ -2,7 +2,7 @@
 // time per view on a dataset with ground-truth depth (figurines or synthetic).
 //   depth_accuracy_bench DATASET [--gt-views N] [--skip K] [--threads T] [--no-hierarchy] [--no-filter]
 //                        [--every-view] [--shift-iterations N] [--voxel METRES] [--level-step DEG]
-//                        [--level-ratio R] [--reference-points K]
+//                        [--level-ratio R] [--reference-points K] [--resample-reference]
 // Evaluates the first N views that have ground truth (after skipping the
 // first --skip ones), streaming frames from the start of the sequence.
 // --every-view: depth (and filtering) of every view from the first to the
@@ -11,7 +11,8 @@
 // ground truth only.
 // --level-step: GradientDepthOptions::level_min_step_deg (0: every view within 5°).
 // --level-ratio: GradientDepthOptions::level_angle_ratio; --reference-points:
-// GradientDepthOptions::refine_reference_points.
+// GradientDepthOptions::refine_reference_points; --resample-reference:
+// GradientDepthOptions::reuse_reference_patch off.
 #include <spdlog/spdlog.h>
 #include <tbb/global_control.h>
 
@@ -40,7 +41,7 @@ int main(int argc, char** argv) {
   if (argc < 2) {
     std::fprintf(stderr, "usage: %s DATASET [--gt-views N] [--skip K] [--threads T] [--no-hierarchy] [--no-filter] "
                  "[--every-view] [--shift-iterations N] [--voxel METRES] [--level-step DEG] [--level-ratio R] "
-                 "[--reference-points K]\n",
+                 "[--reference-points K] [--resample-reference]\n",
                  argv[0]);
     return 2;
   }
@@ -54,6 +55,7 @@ int main(int argc, char** argv) {
     else if (!std::strcmp(argv[a], "--skip") && a + 1 < argc) skip = std::atoi(argv[++a]);
     else if (!std::strcmp(argv[a], "--threads") && a + 1 < argc) threads = std::atoi(argv[++a]);
     else if (!std::strcmp(argv[a], "--no-hierarchy")) sopt.gradient.use_hierarchy = false;
+    else if (!std::strcmp(argv[a], "--resample-reference")) sopt.gradient.reuse_reference_patch = false;
     else if (!std::strcmp(argv[a], "--no-filter")) sopt.run_filter = false;
     else if (!std::strcmp(argv[a], "--every-view")) every_view = true;
     else if (!std::strcmp(argv[a], "--shift-iterations") && a + 1 < argc) sopt.gradient.shift_iterations = std::atoi(argv[++a]);

@@ -8,6 +8,8 @@
 // confidence as float32 and the label as uint8, row-major).
 // --ray-stats: how many depths lie on rays that miss V (grown by 0-50 %).
 // --every-level: settle_outside_volume off (every level for every pixel).
+// --resample-reference: reuse_reference_patch off (the reference side of a
+//   later level's patches sampled again at each reference point's depth).
 // --ref: compares each view with DIR/sparse_NNNN.bin from an earlier run:
 // pixels whose depth, confidence or label differ, max |Δdepth| (absolute and
 // relative) and max |Δconfidence|; exit status 1 when a map is missing.
@@ -100,6 +102,7 @@ int main(int argc, char** argv) {
   std::string out_dir, ref_dir;
   bool ray_stats = false;
   bool every_level = false;
+  bool resample_reference = false;
   for (int a = 2; a < argc; ++a) {
     if (!std::strcmp(argv[a], "--views") && a + 1 < argc) {
       wanted.clear();
@@ -118,6 +121,8 @@ int main(int argc, char** argv) {
       ray_stats = true;
     } else if (!std::strcmp(argv[a], "--every-level")) {
       every_level = true;
+    } else if (!std::strcmp(argv[a], "--resample-reference")) {
+      resample_reference = true;
     } else {
       std::fprintf(stderr, "unknown or incomplete option %s\n", argv[a]);
       return 2;
@@ -128,6 +133,7 @@ int main(int argc, char** argv) {
   const Dataset ds = Dataset::Open(dopt);
   GradientDepthOptions options;
   options.settle_outside_volume = !every_level;
+  options.reuse_reference_patch = !resample_reference;
   std::vector<PinholeView> views;
   for (int i = 0; i < ds.NumViews(); ++i) views.push_back(ds.View(i));
   const std::vector<char> grid = HierarchyGrid(views, options);

@@ -186,6 +186,47 @@ TEST(GradientDepthEstimator, SettlingOutsideVKeepsLabelsAndForegroundDepths) {
   EXPECT_NEAR(ss.Coverage(), sa.Coverage(), 0.002);
 }
 
+TEST(GradientDepthEstimator, ReusingTheReferencePatchKeepsDepths) {
+  // A later level's patches all centre on the pixel; sampling their reference
+  // side once at the predicted depth instead of at each reference point's
+  // changes the depths by a small fraction of their error, not the labels.
+  const auto v = MakeSynthViews("tabletop");
+  GradientDepthOptions resample;
+  resample.reuse_reference_patch = false;
+  GradientDepthOptions reuse;
+  reuse.reuse_reference_patch = true;
+  const DepthMap a_map = GradientDepthEstimator(resample).Estimate(v.ref, v.NeighborPtrs(), v.volume);
+  const DepthMap b_map = GradientDepthEstimator(reuse).Estimate(v.ref, v.NeighborPtrs(), v.volume);
+  long long valid = 0, label_changed = 0, both = 0, moved = 0;
+  std::vector<double> rel;
+  for (int r = 0; r < a_map.depth.rows; ++r)
+    for (int c = 0; c < a_map.depth.cols; ++c) {
+      const float a = a_map.depth.at<float>(r, c), b = b_map.depth.at<float>(r, c);
+      if (!(a > 0) && !(b > 0)) continue;
+      ++valid;
+      if ((a > 0) != (b > 0) || a_map.label.at<std::uint8_t>(r, c) != b_map.label.at<std::uint8_t>(r, c)) {
+        ++label_changed;
+        continue;
+      }
+      ++both;
+      moved += a != b;
+      rel.push_back(std::abs(b - a) / a);
+    }
+  ASSERT_GT(both, 10000);
+  std::sort(rel.begin(), rel.end());
+  const double median = rel[rel.size() / 2], p99 = rel[rel.size() * 99 / 100];
+  std::printf("depths %lld: label or validity changed %lld; of %lld, %lld moved, relative change median %.2e, "
+              "99th percentile %.2e\n",
+              valid, label_changed, both, moved, median, p99);
+  EXPECT_LE(label_changed, 0.001 * valid);
+  EXPECT_GT(moved, 0.5 * both);  // it does take the other path
+  EXPECT_LT(median, 1e-5);
+  EXPECT_LT(p99, 1e-3);
+  const auto sa = ScoreDepth(v, a_map, /*skip_edges=*/true), sb = ScoreDepth(v, b_map, /*skip_edges=*/true);
+  EXPECT_NEAR(sb.Accuracy(), sa.Accuracy(), 0.002);
+  EXPECT_NEAR(sb.Coverage(), sa.Coverage(), 0.002);
+}
+
 TEST(GradientDepthEstimator, HierarchyBeatsNearestNeighboursOnly) {
   const auto v = MakeSynthViews("sphere");
   GradientDepthOptions nearest;
