@@ -643,8 +643,18 @@ LFRECON_DEPTH_CLONES long long EstimateRows(const RowJob& job, int begin, int en
         const int count = std::min(o.max_reference_points, static_cast<int>(std::ceil(s_far - s_near)) + 1);
         if (count <= 0) continue;
         solver.SampleLine(ray, s_near, count, &line);
+        // reuse_reference_patch: the reference side sampled once per block of
+        // kScanBlock reference points, at the block's middle depth.
+        constexpr int kScanBlock = 8;
+        float ref_row[9];
+        const float* ref = nullptr;
         for (int k = 0; k < count; ++k) {
-          const ShiftMeasurement m = solver.Measure(ray, s_near + k, 1, line.data() + k);
+          if (o.reuse_reference_patch && k % kScanBlock == 0) {
+            const double s_mid = s_near + k + 0.5 * (std::min(kScanBlock, count - k) - 1), d_mid = ray.Depth(s_mid);
+            ref = d_mid > 0 && ray.InFront(d_mid) && solver.ReferencePatch(ray, s_mid, d_mid, 1, ref_row) ? ref_row
+                                                                                                        : nullptr;
+          }
+          const ShiftMeasurement m = solver.Measure(ray, s_near + k, 1, line.data() + k, true, ref);
           if (!m.valid || std::abs(m.shift) > 2.0) continue;
           const double d = ray.Depth(s_near + k + m.shift);
           if (!(d > 0)) continue;

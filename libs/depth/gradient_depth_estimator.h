@@ -115,13 +115,14 @@ struct GradientDepthOptions {
   // < 0.01 % of pixels, sparse depth ~40 % faster (docs/benchmarks.md,
   // "Levels stop outside V"). false: every level for every pixel (the paper).
   bool settle_outside_volume = true;
-  // A later level's search samples the reference side of its patches (I_i's
-  // samples that the plane at a reference point's depth maps onto I_j's
-  // patch) once, at the predicted depth, for all its reference points and
-  // shift iterations (ours, for speed). Every such patch is centred on the
-  // pixel itself; the depth changes only its shape (the plane homography's
-  // Jacobian), by a negligible amount within ±outlier_pixels of the
-  // prediction. false: sampled at each reference point's own depth.
+  // The reference side of the patches (I_i's samples that the plane at the
+  // reference point's depth maps onto I_j's patch) is sampled once per later
+  // level's search, at the predicted depth, for all its reference points and
+  // shift iterations, and once per 8 reference points of the first level's
+  // scan (ours, for speed). Every such patch is centred on the pixel itself;
+  // the depth changes only its shape (the plane homography's Jacobian), by
+  // a negligible amount over a few pixels of the epipolar line. false:
+  // sampled at each reference point's own depth.
   bool reuse_reference_patch = true;
 
   void Check() const;
