@@ -24,7 +24,8 @@
 // --consistency V,RHO,R (pipeline mode): PropagationOptions::consistency views,
 //   rho_min, patch_radius_px (V = 0: no check); --max-frame-gap N: StreamingDepthOptions::max_frame_gap;
 //   --ray-margin M: GradientDepthOptions::ray_margin (negative: every edge pixel gets a depth);
-//   --peak-fraction F: GradientDepthOptions::gradient_peak_fraction (1: only gradient maxima get a depth).
+//   --peak-fraction F: GradientDepthOptions::gradient_peak_fraction (1: only gradient maxima get a depth);
+//   --photo-max-views N: PhotoconsistencyOptions::max_views of the densification (0: every view within 5°).
 // --view-stride K (pipeline mode): PipelineOptions::views = 0, K, 2K, ... (`lfrecon run --views
 //   0:N:K`): only those views get depth maps and are fused; every frame is still read and
 //   serves as a neighbour (hierarchy, photoconsistency). At 3000 frames a loop (0.12°) K = 5
@@ -246,6 +247,7 @@ int main(int argc, char** argv) {
   DenseConsistencyOptions consistency;
   int max_frame_gap = StreamingDepthOptions{}.max_frame_gap;
   std::optional<double> ray_margin, peak_fraction;
+  std::optional<int> photo_max_views;
   int frames = 3000, width = 1280, height = 720, divisions = 256, report_every = 250, threads = 0, max_block = 16;
   int view_stride = 1;
   double loops = 0, budget_mib = 1024;
@@ -282,6 +284,7 @@ int main(int argc, char** argv) {
                   &consistency.patch_radius_px);
     } else if (k == "--ray-margin") ray_margin = std::atof(value().c_str());  // negative: every edge pixel
     else if (k == "--peak-fraction") peak_fraction = std::atof(value().c_str());
+    else if (k == "--photo-max-views") photo_max_views = std::atoi(value().c_str());
     else if (k == "--max-frame-gap") max_frame_gap = std::atoi(value().c_str());
     else if (k == "--no-compact") compact = false;
     else if (k == "--view-stride") view_stride = std::atoi(value().c_str());
@@ -428,6 +431,7 @@ int main(int argc, char** argv) {
   po.depth.max_frame_gap = max_frame_gap;
   if (ray_margin) po.depth.gradient.ray_margin = *ray_margin;
   if (peak_fraction) po.depth.gradient.gradient_peak_fraction = *peak_fraction;
+  if (photo_max_views) po.propagation.photo.max_views = *photo_max_views;
   po.write_vdb = false;
   po.write_turntable = false;
   po.fusion.store_budget_bytes = budget;
