@@ -180,7 +180,10 @@ void PhotoconsistencyAccumulator::Begin(const ViewImage& reference, const DepthM
                                 &sum_centre_, &count_centre_})
     v->assign(padded, 0.0f);
   for (std::vector<std::int32_t>* v : {&side_ok_[0], &side_ok_[1], &centre_ok_}) v->assign(padded, 0);
-  samples_.assign(padded * values, 0.0f);
+  static ScratchPool sample_buffers;
+  samples_lease_ = sample_buffers.Acquire(padded * values * sizeof(float));
+  samples_ = static_cast<float*>(samples_lease_.data());
+  std::fill(samples_, samples_ + padded * values, 0.0f);
 
   const float step_px = static_cast<float>(o.sample_step_px);
   tbb::parallel_for(0, rows, [&](int r) {
@@ -220,7 +223,7 @@ void PhotoconsistencyAccumulator::Begin(const ViewImage& reference, const DepthM
       side_ok_[0][i] = side_ok[0] ? -1 : 0;
       side_ok_[1][i] = side_ok[1] ? -1 : 0;
       centre_ok_[i] = centre_ok ? -1 : 0;
-      float* fs = samples_.data() + (i / kLanes) * values * kLanes + i % kLanes;
+      float* fs = samples_ + (i / kLanes) * values * kLanes + i % kLanes;
       for (int k = 0; k < 2 * S; ++k)
         if (side_ok[k / S])
           for (int ch = 0; ch < 3; ++ch) fs[(3 * k + ch) * kLanes] = f[k][ch];
@@ -287,7 +290,7 @@ inline float ColourDifference2Fixed(float d0, float d1, float d2, float chroma_w
 void PhotoconsistencyAccumulator::AddPixel(std::size_t i, const Neighbor& nb) {
   const float* A = nb.A;
   const float d = d_[i], px = px_[i], py = py_[i], sx = sx_[i], sy = sy_[i];
-  const float* fs = samples_.data() + (i / kLanes) * nb.values * kLanes + i % kLanes;
+  const float* fs = samples_ + (i / kLanes) * nb.values * kLanes + i % kLanes;
   // Through the plane at d: y(x) = d·A·x̃ + a is linear in x, so step along θ.
   const float y0[3] = {d * (A[0] * px + A[1] * py + A[2]) + nb.a[0], d * (A[3] * px + A[4] * py + A[5]) + nb.a[1],
                        d * (A[6] * px + A[7] * py + A[8]) + nb.a[2]};
@@ -443,7 +446,7 @@ LFRECON_AVX2 void PhotoconsistencyAccumulator::AddBlock(std::size_t block, const
   const float* A = nb.A;
   const __m256 d = _mm256_loadu_ps(&d_[i]), px = _mm256_loadu_ps(&px_[i]), py = _mm256_loadu_ps(&py_[i]);
   const __m256 sx = _mm256_loadu_ps(&sx_[i]), sy = _mm256_loadu_ps(&sy_[i]);
-  const float* fs = samples_.data() + block * nb.values * L;
+  const float* fs = samples_ + block * nb.values * L;
   const __m256 y0[3] = {_mm256_add_ps(_mm256_mul_ps(d, Dot3(A[0], px, A[1], py, A[2])), _mm256_set1_ps(nb.a[0])),
                         _mm256_add_ps(_mm256_mul_ps(d, Dot3(A[3], px, A[4], py, A[5])), _mm256_set1_ps(nb.a[1])),
                         _mm256_add_ps(_mm256_mul_ps(d, Dot3(A[6], px, A[7], py, A[8])), _mm256_set1_ps(nb.a[2]))};
@@ -541,8 +544,10 @@ EdgeConsistency PhotoconsistencyAccumulator::Finish() {
   EdgeConsistency result = std::move(out_);
   out_ = EdgeConsistency();
   for (std::vector<float>* v : {&d_, &px_, &py_, &sx_, &sy_, &sum_rho_[0], &sum_rho_[1], &count_[0], &count_[1],
-                                &sum_centre_, &count_centre_, &samples_})
+                                &sum_centre_, &count_centre_})
     std::vector<float>().swap(*v);
+  samples_lease_ = ScratchPool::Lease();
+  samples_ = nullptr;
   for (std::vector<std::int32_t>* v : {&side_ok_[0], &side_ok_[1], &centre_ok_}) std::vector<std::int32_t>().swap(*v);
   std::vector<int>().swap(row_);
   std::vector<int>().swap(col_);

@@ -26,6 +26,7 @@
 #include "depth/depth_map.h"
 #include "depth/gradient_depth_estimator.h"
 #include "geometry/pinhole_view.h"
+#include "util/scratch_pool.h"
 
 namespace lfrecon {
 
@@ -165,7 +166,9 @@ class PhotoconsistencyAccumulator {
   std::vector<float> sum_rho_[2], count_[2], sum_centre_, count_centre_;
   // The reference's samples: f+ then f− (3·samples_per_side BGR each), then
   // C0's 3; value v of pixel i at ((i / kLanes)·values + v)·kLanes + i % kLanes.
-  std::vector<float> samples_;
+  // 36 MiB for a 720p view: a block from a ScratchPool, kept for the next view.
+  ScratchPool::Lease samples_lease_;
+  float* samples_ = nullptr;
   bool valid_ = false;
   int added_ = 0;
 };
