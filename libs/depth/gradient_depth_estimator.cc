@@ -388,6 +388,12 @@ class PixelSolver {
     }
     return true;
   }
+  // ReferencePatch at line coordinate s into buf; buf, or null where there is
+  // none (D(s) behind a camera, or a sample outside I_i).
+  const float* ReferencePatchAt(const EpipolarRay& ray, double s, int rows, float* buf) const {
+    const double d = ray.Depth(s);
+    return d > 0 && ray.InFront(d) && ReferencePatch(ray, s, d, rows, buf) ? buf : nullptr;
+  }
 
   // The 2×5 patch at line coordinate s (reference depth D(s)) and its least-squares shift.
   // line: when given (rows = 1 only), I_j's samples on ℓ from SampleLine starting at s.
@@ -470,11 +476,8 @@ class PixelSolver {
     // middle reference point's depth (reuse_reference_patch).
     const int L = 2 * half_ + 1;
     float ref[5 * 9];
-    const float* ref_rows = nullptr;
-    if (o_.reuse_reference_patch) {
-      const double s_mid = s0 + 0.5 * (count - 1), d_mid = ray.Depth(s_mid);
-      if (d_mid > 0 && ray.InFront(d_mid) && ReferencePatch(ray, s_mid, d_mid, o_.patch_rows, ref)) ref_rows = ref;
-    }
+    const float* ref_rows =
+        o_.reuse_reference_patch ? ReferencePatchAt(ray, s0 + 0.5 * (count - 1), o_.patch_rows, ref) : nullptr;
     const float* ref_middle = ref_rows ? ref_rows + (o_.patch_rows / 2) * L : nullptr;
     // Choosing the reference point needs only the 2×5 patch on ℓ itself.
     SampleLine(ray, s0, count, line);
@@ -649,11 +652,8 @@ LFRECON_DEPTH_CLONES long long EstimateRows(const RowJob& job, int begin, int en
         float ref_row[9];
         const float* ref = nullptr;
         for (int k = 0; k < count; ++k) {
-          if (o.reuse_reference_patch && k % kScanBlock == 0) {
-            const double s_mid = s_near + k + 0.5 * (std::min(kScanBlock, count - k) - 1), d_mid = ray.Depth(s_mid);
-            ref = d_mid > 0 && ray.InFront(d_mid) && solver.ReferencePatch(ray, s_mid, d_mid, 1, ref_row) ? ref_row
-                                                                                                        : nullptr;
-          }
+          if (o.reuse_reference_patch && k % kScanBlock == 0)
+            ref = solver.ReferencePatchAt(ray, s_near + k + 0.5 * (std::min(kScanBlock, count - k) - 1), 1, ref_row);
           const ShiftMeasurement m = solver.Measure(ray, s_near + k, 1, line.data() + k, true, ref);
           if (!m.valid || std::abs(m.shift) > 2.0) continue;
           const double d = ray.Depth(s_near + k + m.shift);

@@ -239,10 +239,10 @@ DepthMap DepthPropagator::Filter(const cv::Mat& image, const SplatMaps& splats) 
   const ScratchPool::Lease lease =
       channel_buffers.Acquire(static_cast<std::size_t>(rows) * static_cast<std::size_t>(cols) * n * sizeof(float));
   cv::Mat data(rows, cols, CV_32FC(n), lease.data());
-  data.setTo(0);
   tbb::parallel_for(tbb::blocked_range<int>(0, rows), [&](const tbb::blocked_range<int>& range) {
     for (int r = range.begin(); r != range.end(); ++r) {
       float* s = data.ptr<float>(r);
+      std::fill(s, s + static_cast<std::ptrdiff_t>(cols) * n, 0.0f);  // the pool's block is not zeroed
       const float *df = splats.depth_fg.ptr<float>(r), *cf = splats.confidence_fg.ptr<float>(r);
       const float *db = splats.depth_bg.ptr<float>(r), *cb = splats.confidence_bg.ptr<float>(r);
       const float v = V(r);

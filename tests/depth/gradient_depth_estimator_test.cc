@@ -137,6 +137,26 @@ TEST(GradientDepthEstimator, PeakFractionKeepsTheDepthsOfThePeaksBitForBit) {
   EXPECT_GE(s.Accuracy(), 0.95);
 }
 
+// Pixels with a depth in a or b: *valid counts them and *label_changed those
+// whose validity or label differs; `same(r, c, depth_a, depth_b, label)` is
+// called for the others.
+template <class Same>
+void CompareDepthMaps(const DepthMap& a, const DepthMap& b, long long* valid, long long* label_changed, Same same) {
+  *valid = *label_changed = 0;
+  for (int r = 0; r < a.depth.rows; ++r)
+    for (int c = 0; c < a.depth.cols; ++c) {
+      const float da = a.depth.at<float>(r, c), db = b.depth.at<float>(r, c);
+      if (!(da > 0) && !(db > 0)) continue;
+      ++*valid;
+      const std::uint8_t la = a.label.at<std::uint8_t>(r, c);
+      if ((da > 0) != (db > 0) || la != b.label.at<std::uint8_t>(r, c)) {
+        ++*label_changed;
+        continue;
+      }
+      same(r, c, da, db, la);
+    }
+}
+
 TEST(GradientDepthEstimator, SettlingOutsideVKeepsLabelsAndForegroundDepths) {
   // The tabletop: objects in V on a textured floor that reaches far outside
   // it. Stopping the levels of a pixel once its depth is settled outside V
@@ -152,25 +172,16 @@ TEST(GradientDepthEstimator, SettlingOutsideVKeepsLabelsAndForegroundDepths) {
   const auto fg = static_cast<std::uint8_t>(DepthLabel::kForeground);
   long long valid = 0, label_changed = 0, foreground = 0, foreground_changed = 0, background = 0,
             background_changed = 0;
-  for (int r = 0; r < all.depth.rows; ++r)
-    for (int c = 0; c < all.depth.cols; ++c) {
-      const float a = all.depth.at<float>(r, c), b = some.depth.at<float>(r, c);
-      if (!(a > 0) && !(b > 0)) continue;
-      ++valid;
-      const std::uint8_t la = all.label.at<std::uint8_t>(r, c), lb = some.label.at<std::uint8_t>(r, c);
-      if ((a > 0) != (b > 0) || la != lb) {
-        ++label_changed;
-        continue;
-      }
-      const bool changed = a != b || all.confidence.at<float>(r, c) != some.confidence.at<float>(r, c);
-      if (la == fg) {
-        ++foreground;
-        foreground_changed += changed;
-      } else {
-        ++background;
-        background_changed += changed;
-      }
+  CompareDepthMaps(all, some, &valid, &label_changed, [&](int r, int c, float a, float b, std::uint8_t label) {
+    const bool changed = a != b || all.confidence.at<float>(r, c) != some.confidence.at<float>(r, c);
+    if (label == fg) {
+      ++foreground;
+      foreground_changed += changed;
+    } else {
+      ++background;
+      background_changed += changed;
     }
+  });
   std::printf("depths %lld: label or validity changed %lld; foreground %lld (%lld changed), background %lld (%lld "
               "changed)\n",
               valid, label_changed, foreground, foreground_changed, background, background_changed);
@@ -199,19 +210,11 @@ TEST(GradientDepthEstimator, ReusingTheReferencePatchKeepsDepths) {
   const DepthMap b_map = GradientDepthEstimator(reuse).Estimate(v.ref, v.NeighborPtrs(), v.volume);
   long long valid = 0, label_changed = 0, both = 0, moved = 0;
   std::vector<double> rel;
-  for (int r = 0; r < a_map.depth.rows; ++r)
-    for (int c = 0; c < a_map.depth.cols; ++c) {
-      const float a = a_map.depth.at<float>(r, c), b = b_map.depth.at<float>(r, c);
-      if (!(a > 0) && !(b > 0)) continue;
-      ++valid;
-      if ((a > 0) != (b > 0) || a_map.label.at<std::uint8_t>(r, c) != b_map.label.at<std::uint8_t>(r, c)) {
-        ++label_changed;
-        continue;
-      }
-      ++both;
-      moved += a != b;
-      rel.push_back(std::abs(b - a) / a);
-    }
+  CompareDepthMaps(a_map, b_map, &valid, &label_changed, [&](int, int, float a, float b, std::uint8_t) {
+    ++both;
+    moved += a != b;
+    rel.push_back(std::abs(b - a) / a);
+  });
   ASSERT_GT(both, 10000);
   std::sort(rel.begin(), rel.end());
   const double median = rel[rel.size() / 2], p99 = rel[rel.size() * 99 / 100];
