@@ -31,6 +31,10 @@ PipelineOptions OptionsFromFlags(const ReconstructionFlags& f) {
     if (f.all_views) throw OptionError("--view-step-deg and --all-views exclude each other");
     options.selection.min_step_deg = *f.view_step_deg;
   }
+  if (f.refine_depth_views) {
+    if (*f.refine_depth_views < 0) throw OptionError("--refine-depth-views must be >= 0 (0: no refinement)");
+    options.propagation.refinement.views = *f.refine_depth_views;
+  }
   options.Check();
   return options;
 }

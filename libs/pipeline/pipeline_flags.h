@@ -32,6 +32,9 @@ struct ReconstructionFlags {
   // Degrees between consecutive selected views (ViewSelectionOptions::min_step_deg, > 0 and < 90);
   // unset: its default (--view-step-deg).
   std::optional<double> view_step_deg;
+  // Neighbours of the dense depth's photometric refinement (PhotometricRefinementOptions::views,
+  // >= 0; 0: off); unset: the default (--refine-depth-views).
+  std::optional<int> refine_depth_views;
 };
 
 // PipelineOptions defaults with the flags applied; checked (PipelineOptions::Check). Throws OptionError.

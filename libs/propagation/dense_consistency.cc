@@ -36,33 +36,11 @@ const cv::Mat& Colours(const ViewImage& v) {
                                                                                                     : v.image;
 }
 
-// Which side of the reference a neighbour's centre lies on (its camera x axis).
-int SideOf(const PinholeView& reference, const PinholeView& nb) {
-  return (reference.R * nb.Center() + reference.t).x() >= 0 ? 0 : 1;
-}
-
 }  // namespace
 
 std::vector<int> DenseConsistencyAccumulator::SelectNeighbors(
     const PinholeView& reference, const std::vector<const PinholeView*>& neighbors) const {
-  // Per side, usable neighbours by decreasing angle (widest baseline first).
-  std::vector<std::pair<double, int>> side[2];
-  for (std::size_t j = 0; j < neighbors.size(); ++j) {
-    if (!neighbors[j]) continue;
-    const double angle = UsableAngle(reference, *neighbors[j], options_.max_view_angle_deg);
-    if (angle < 0) continue;
-    side[SideOf(reference, *neighbors[j])].emplace_back(angle, static_cast<int>(j));
-  }
-  for (auto& s : side)
-    std::stable_sort(s.begin(), s.end(), [](const auto& x, const auto& y) { return x.first > y.first; });
-  // Alternate sides, so an even split where both have enough.
-  std::vector<int> out;
-  std::size_t k[2] = {0, 0};
-  while (static_cast<int>(out.size()) < options_.views && (k[0] < side[0].size() || k[1] < side[1].size())) {
-    for (int s = 0; s < 2 && static_cast<int>(out.size()) < options_.views; ++s)
-      if (k[s] < side[s].size()) out.push_back(side[s][k[s]++].second);
-  }
-  return out;
+  return WidestNeighbors(reference, neighbors, options_.max_view_angle_deg, options_.views);
 }
 
 namespace {

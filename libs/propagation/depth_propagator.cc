@@ -18,6 +18,7 @@ namespace lfrecon {
 void PropagationOptions::Check() const {
   photo.Check();
   consistency.Check();
+  refinement.Check();
   LFRECON_CHECK_OPTION(dt_sigma_spatial > 0 && dt_sigma_spatial <= 1);
   LFRECON_CHECK_OPTION(dt_sigma_color > 0);
   LFRECON_CHECK_OPTION(dt_mode == DomainTransformMode::kNormalizedConvolution ||
@@ -426,6 +427,9 @@ DenseDepthResult DepthPropagator::Run(const ViewImage& reference, const std::vec
   timer.Restart();
   CheckDenseConsistency(reference, neighbors, options_.consistency, &result.dense, labelled.depth);
   result.seconds_consistency = timer.Seconds();
+  timer.Restart();
+  RefineDepthPhotometrically(reference, neighbors, options_.refinement, &result.dense, labelled.depth);
+  result.seconds_refinement = timer.Seconds();
   return result;
 }
 

@@ -50,6 +50,7 @@
 #include "geometry/triangle_mesh.h"
 #include "propagation/bidirectional_photoconsistency.h"
 #include "propagation/dense_consistency.h"
+#include "propagation/photometric_refinement.h"
 
 namespace lfrecon {
 
@@ -123,6 +124,9 @@ struct PropagationOptions {
   // After the filter, each foreground depth is checked against the frames of
   // the widest-baseline neighbours (dense_consistency.h; ours: views = 0 turns it off).
   DenseConsistencyOptions consistency;
+  // Then each foreground depth that passed is searched again photometrically
+  // (photometric_refinement.h; ours: views = 0 turns it off).
+  PhotometricRefinementOptions refinement;
   // Pixels that had a depth keep it where their own side wins (ours; false:
   // every pixel takes the filtered depth D' of eq. 10, as the paper).
   bool keep_edge_depths = true;
@@ -191,6 +195,7 @@ struct DenseDepthResult {
   double seconds_splat = 0;
   double seconds_filter = 0;
   double seconds_consistency = 0;
+  double seconds_refinement = 0;
 };
 
 class DepthPropagator {

@@ -39,4 +39,32 @@ inline double UsableAngle(const PinholeView& ref, const PinholeView& nb, double 
   return angle;
 }
 
+// Which side of the reference a neighbour's centre lies on (its camera x axis): 0 or 1.
+inline int SideOf(const PinholeView& reference, const PinholeView& nb) {
+  return (reference.R * nb.Center() + reference.t).x() >= 0 ? 0 : 1;
+}
+
+// At most `count` of `neighbors` (indices; null entries skipped) within
+// max_view_angle_deg, the widest baselines first, alternating between the
+// reference's two sides so both are represented where both have views.
+inline std::vector<int> WidestNeighbors(const PinholeView& reference, const std::vector<const PinholeView*>& neighbors,
+                                        double max_view_angle_deg, int count) {
+  std::vector<std::pair<double, int>> side[2];
+  for (std::size_t j = 0; j < neighbors.size(); ++j) {
+    if (!neighbors[j]) continue;
+    const double angle = UsableAngle(reference, *neighbors[j], max_view_angle_deg);
+    if (angle < 0) continue;
+    side[SideOf(reference, *neighbors[j])].emplace_back(angle, static_cast<int>(j));
+  }
+  for (auto& s : side)
+    std::stable_sort(s.begin(), s.end(), [](const auto& x, const auto& y) { return x.first > y.first; });
+  std::vector<int> out;
+  std::size_t k[2] = {0, 0};
+  while (static_cast<int>(out.size()) < count && (k[0] < side[0].size() || k[1] < side[1].size())) {
+    for (int s = 0; s < 2 && static_cast<int>(out.size()) < count; ++s)
+      if (k[s] < side[s].size()) out.push_back(side[s][k[s]++].second);
+  }
+  return out;
+}
+
 }  // namespace lfrecon

@@ -40,6 +40,7 @@ struct RunArgs {
   double sigma_s = 0;
   std::optional<double> chroma_weight;
   std::optional<double> view_step_deg;
+  std::optional<int> refine_depth_views;
   bool no_refine_poses = false;
   bool no_mask_free_space = false;
   bool no_geometric_consistency = false;
@@ -87,6 +88,7 @@ int RunPipeline(const RunArgs& args) {
   flags.mask_carving = args.mask_carving;
   flags.chroma_weight = args.chroma_weight;
   flags.view_step_deg = args.view_step_deg;
+  flags.refine_depth_views = args.refine_depth_views;
   PipelineOptions options = OptionsFromFlags(flags);
   const Dataset ds = Dataset::Open(args.data.Resolve());
   if (!args.views.empty()) options.views = ParseViewRange(args.views, ds.NumViews());
@@ -172,6 +174,9 @@ void AddRunCommand(CLI::App& root, int* exit_code) {
                 "Process every view (no view selection): depth and fusion of each frame, also on a dense video");
   cmd->add_option("--view-step-deg", args->view_step_deg,
                   "Degrees between consecutive selected views (default 2): larger processes fewer views, faster");
+  cmd->add_option("--refine-depth-views", args->refine_depth_views,
+                  "Neighbours (the widest baselines) each dense depth is searched again over by ZNCC "
+                  "(PhotometricRefinementOptions::views; 0: no refinement)");
   cmd->add_option("--max-frame-gap", args->max_frame_gap,
                   "Views more than this many frames apart are never neighbours (0: no limit; default 1000). "
                   "`lfrecon stream --max-frame-gap` with the same bound computes the same mesh");

@@ -112,6 +112,11 @@ int main(int argc, char** argv) {
     else if (!std::strcmp(argv[a], "--no-inverse-depth")) popt.filter_inverse_depth = false;
     else if (!std::strcmp(argv[a], "--two-sided")) popt.one_sided_silhouettes = false;
     else if (is("--consistency-views")) popt.consistency.views = std::atoi(argv[++a]);
+    else if (is("--refine-views")) popt.refinement.views = std::atoi(argv[++a]);
+    else if (is("--refine-steps")) popt.refinement.steps = std::atoi(argv[++a]);
+    else if (is("--refine-step-px")) popt.refinement.step_px = std::atof(argv[++a]);
+    else if (is("--refine-radius")) popt.refinement.patch_radius_px = std::atoi(argv[++a]);
+    else if (is("--refine-ncc-min")) popt.refinement.ncc_min = std::atof(argv[++a]);
     else if (is("--consistency-min")) popt.consistency.rho_min = std::atof(argv[++a]);
     else if (is("--consistency-patch")) popt.consistency.patch_radius_px = std::atoi(argv[++a]);
     else if (!std::strcmp(argv[a], "--consistency-stats")) consistency_stats = true;
@@ -339,10 +344,10 @@ int main(int argc, char** argv) {
                     own_n[b] ? double(own_ok[b]) / own_n[b] : 0);
     }
     std::printf("view %4d: filtered accuracy %.3f coverage %.3f | dense accuracy %.3f coverage %.3f "
-                "(edge pixels only: %.3f) | %.1f ms (photo %.1f, splat %.1f, filter %.1f), %zu neighbours\n",
+                "(edge pixels only: %.3f) | %.1f ms (photo %.1f, splat %.1f, filter %.1f, refine %.1f), %zu neighbours\n",
                 i, mf.Accuracy(), mf.Coverage(), md.Accuracy(), md.Coverage(), ms.Accuracy(), 1000 * best_total,
                 1000 * best.seconds_photoconsistency, 1000 * best.seconds_splat, 1000 * best.seconds_filter,
-                nbs.size());
+                1000 * best.seconds_refinement, nbs.size());
     if (!preview_dir.empty()) {
       const std::string stem = fs::path(ds.views()[i].name).stem().string();
       WriteEdgePreview(fs::path(preview_dir) / ("propagation_edges_" + stem + ".png"), image, classes);
