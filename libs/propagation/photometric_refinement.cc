@@ -157,15 +157,20 @@ void PhotometricRefinementAccumulator::Add(const ViewImage& neighbor) {
       const float* ref_patch = &ref_patch_[i * static_cast<std::size_t>(n)];
       float* score = &scores_[i * static_cast<std::size_t>(hyps)];
       for (int k = 0; k < hyps; ++k) {
+        // Over a patch of a few pixels at <= 5° the plane's homography is affine
+        // to well under a hundredth of a pixel: positions = centre + a·J0 + b·J1.
         const Eigen::Vector3f h0 = centre + (static_cast<float>(k - options_.steps) * zeta_step) * e;
+        const float inv0 = 1.0f / h0.z();
+        const float cx = h0.x() * inv0, cy = h0.y() * inv0;
+        const float j0x = (m0.x() - cx * m0.z()) * inv0, j0y = (m0.y() - cy * m0.z()) * inv0;
+        const float j1x = (m1.x() - cx * m1.z()) * inv0, j1y = (m1.y() - cy * m1.z()) * inv0;
         float sum = 0, sum_sq = 0, cross = 0;
         int s = 0;
         for (int b = -r; b <= r; ++b) {
-          const Eigen::Vector3f hb = h0 + static_cast<float>(b) * m1;
-          for (int a = -r; a <= r; ++a, ++s) {
-            const Eigen::Vector3f h = hb + static_cast<float>(a) * m0;
-            const float inv = 1.0f / h.z();
-            const float v = SampleGrey(grey, h.x() * inv, h.y() * inv);
+          float x = cx - static_cast<float>(r) * j0x + static_cast<float>(b) * j1x;
+          float y = cy - static_cast<float>(r) * j0y + static_cast<float>(b) * j1y;
+          for (int a = -r; a <= r; ++a, ++s, x += j0x, y += j0y) {
+            const float v = SampleGrey(grey, x, y);
             sum += v;
             sum_sq += v * v;
             cross += v * ref_patch[s];  // the reference patch is zero-mean: Σ(v − μ)·p = Σ v·p
