@@ -7,6 +7,10 @@
 #include <cmath>
 #include <opencv2/imgproc.hpp>
 
+#if defined(__x86_64__)
+#include <immintrin.h>
+#endif
+
 #include "propagation/neighbor_views.h"
 #include "util/error.h"
 
@@ -37,23 +41,12 @@ namespace {
 
 // Grey levels (CV_32F) of the frame the photometric checks read: `smoothed`
 // when present (its own `grey` when that matches), else `image`.
-cv::Mat GreyOf(const ViewImage& v) {
+cv::Mat RefinementGrey(const ViewImage& v) {
   const bool smoothed = !v.smoothed.empty() && v.smoothed.size() == v.image.size() && v.smoothed.type() == CV_32FC3;
   if (smoothed && v.grey.size() == v.smoothed.size() && v.grey.type() == CV_32F) return v.grey;
   cv::Mat grey;
   cv::cvtColor(smoothed ? v.smoothed : v.image, grey, cv::COLOR_BGR2GRAY);
   return grey;
-}
-
-// Bilinear grey sample at COLMAP coordinates (pixel centres at +0.5); the
-// caller has checked that (x, y) lies inside.
-inline float SampleGrey(const cv::Mat& grey, float x, float y) {
-  const float fx = x - 0.5f, fy = y - 0.5f;
-  const int x0 = static_cast<int>(fx), y0 = static_cast<int>(fy);
-  const float ax = fx - x0, ay = fy - y0;
-  const float* r0 = grey.ptr<float>(y0) + x0;
-  const float* r1 = grey.ptr<float>(y0 + 1) + x0;
-  return (1 - ay) * ((1 - ax) * r0[0] + ax * r0[1]) + ay * ((1 - ax) * r1[0] + ax * r1[1]);
 }
 
 }  // namespace
@@ -80,7 +73,7 @@ void PhotometricRefinementAccumulator::Begin(const ViewImage& reference, const D
 
   cv::Mat keep_mask;
   if (!keep.empty() && keep.size() == dense.depth.size()) keep_mask = keep != 0;
-  const cv::Mat grey = GreyOf(reference);
+  const cv::Mat grey = RefinementGrey(reference);
   const int r = options_.patch_radius_px, n = (2 * r + 1) * (2 * r + 1);
   const float texture_min = static_cast<float>(options_.texture_min);
   std::vector<float> patch(static_cast<std::size_t>(n));
@@ -109,13 +102,148 @@ void PhotometricRefinementAccumulator::Begin(const ViewImage& reference, const D
       ref_norm_.push_back(std::sqrt(ss));
     }
   }
+  // Blocks of 8 pixels, each sample's 8 values side by side (the AVX2 path
+  // loads them at once); norms padded to whole blocks.
+  const std::size_t blocks = (pixels_.size() + 7) / 8;
+  std::vector<float> blocked(blocks * 8 * static_cast<std::size_t>(n), 0.0f);
+  for (std::size_t i = 0; i < pixels_.size(); ++i)
+    for (int s = 0; s < n; ++s)
+      blocked[((i / 8) * static_cast<std::size_t>(n) + static_cast<std::size_t>(s)) * 8 + i % 8] =
+          ref_patch_[i * static_cast<std::size_t>(n) + static_cast<std::size_t>(s)];
+  ref_patch_.swap(blocked);
+  ref_norm_.resize(blocks * 8, 1.0f);
   scores_.assign(pixels_.size() * static_cast<std::size_t>(2 * options_.steps + 1), 0.0f);
   counts_.assign(pixels_.size(), 0);
 }
 
+namespace {
+
+// What one neighbour's ZNCC of one block of up to 8 refined pixels needs.
+struct BlockGeometry {
+  int lanes = 0;
+  bool inside[8] = {};                      // the view sees every sample of every hypothesis
+  float centre_x[8], centre_y[8], centre_z[8];  // M p + ζ0 e
+};
+
+struct ViewGeometry {
+  const float* grey = nullptr;
+  std::size_t stride = 0;  // floats per row
+  float e[3], m0[3], m1[3];
+  float zeta_step = 0;
+  int steps = 0, radius = 0, n = 0;
+};
+
+// ZNCC of every hypothesis of one pixel (lane) of the block, added to
+// score[0 .. 2 steps]. Positions: the plane's homography, affine over the
+// patch (one division per hypothesis; over a few pixels at <= 5° it is affine
+// to well under 0.01 px). Written so that the AVX2 path below does the same
+// float operations in the same order.
+void ScoreLaneScalar(const ViewGeometry& g, const BlockGeometry& b, int lane, const float* ref_block,
+                     float ref_norm, float* score) {
+  const int r = g.radius;
+  const float nf = static_cast<float>(g.n);
+  for (int k = 0; k <= 2 * g.steps; ++k) {
+    const float t = static_cast<float>(k - g.steps) * g.zeta_step;
+    const float hx = b.centre_x[lane] + t * g.e[0], hy = b.centre_y[lane] + t * g.e[1], hz = b.centre_z[lane] + t * g.e[2];
+    const float inv = 1.0f / hz;
+    const float cx = hx * inv, cy = hy * inv;
+    const float j0x = (g.m0[0] - cx * g.m0[2]) * inv, j0y = (g.m0[1] - cy * g.m0[2]) * inv;
+    const float j1x = (g.m1[0] - cx * g.m1[2]) * inv, j1y = (g.m1[1] - cy * g.m1[2]) * inv;
+    float sum = 0, sum_sq = 0, cross = 0;
+    int s = 0;
+    for (int bb = -r; bb <= r; ++bb)
+      for (int a = -r; a <= r; ++a, ++s) {
+        const float fa = static_cast<float>(a), fb = static_cast<float>(bb);
+        const float x = cx + (fa * j0x + fb * j1x) - 0.5f, y = cy + (fa * j0y + fb * j1y) - 0.5f;
+        const int x0 = static_cast<int>(x), y0 = static_cast<int>(y);
+        const float ax = x - static_cast<float>(x0), ay = y - static_cast<float>(y0);
+        const float* p = g.grey + static_cast<std::size_t>(y0) * g.stride + static_cast<std::size_t>(x0);
+        const float v = (1 - ay) * ((1 - ax) * p[0] + ax * p[1]) + ay * ((1 - ax) * p[g.stride] + ax * p[g.stride + 1]);
+        sum += v;
+        sum_sq += v * v;
+        cross += v * ref_block[s * 8 + lane];  // the reference patch is zero-mean: Σ(v − μ)·p = Σ v·p
+      }
+    const float var = sum_sq - sum * sum / nf;
+    score[k] += var > 1e-12f ? cross / (std::sqrt(var) * ref_norm) : 0.0f;
+  }
+}
+
+#if defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__))
+#define LFRECON_REFINE_AVX2 1
+bool RefinementCpuHasAvx2() {
+  static const bool has = __builtin_cpu_supports("avx2");
+  return has;
+}
+
+// ScoreLaneScalar for the 8 lanes at once (lanes not inside read a safe
+// pixel and are not added).
+__attribute__((target("avx2"))) void ScoreBlockAvx2(const ViewGeometry& g, const BlockGeometry& b,
+                                                     const float* ref_block, const float* ref_norm,
+                                                     float* const* score) {
+  const int r = g.radius;
+  const __m256 one = _mm256_set1_ps(1.0f), half = _mm256_set1_ps(0.5f), nf = _mm256_set1_ps(static_cast<float>(g.n));
+  __m256 ok_mask;
+  {
+    alignas(32) float ok[8];
+    for (int l = 0; l < 8; ++l) ok[l] = l < b.lanes && b.inside[l] ? 1.0f : 0.0f;
+    ok_mask = _mm256_cmp_ps(_mm256_load_ps(ok), _mm256_setzero_ps(), _CMP_GT_OQ);
+  }
+  const __m256 bx = _mm256_loadu_ps(b.centre_x), by = _mm256_loadu_ps(b.centre_y), bz = _mm256_loadu_ps(b.centre_z);
+  const __m256 norm = _mm256_loadu_ps(ref_norm);
+  const __m256i stride = _mm256_set1_epi32(static_cast<int>(g.stride));
+  const __m256 safe = _mm256_set1_ps(0.75f);  // a position inside any frame of 2x2 pixels or more
+  for (int k = 0; k <= 2 * g.steps; ++k) {
+    const __m256 t = _mm256_set1_ps(static_cast<float>(k - g.steps) * g.zeta_step);
+    const __m256 hx = _mm256_add_ps(bx, _mm256_mul_ps(t, _mm256_set1_ps(g.e[0])));
+    const __m256 hy = _mm256_add_ps(by, _mm256_mul_ps(t, _mm256_set1_ps(g.e[1])));
+    const __m256 hz = _mm256_add_ps(bz, _mm256_mul_ps(t, _mm256_set1_ps(g.e[2])));
+    const __m256 inv = _mm256_div_ps(one, hz);
+    const __m256 cx = _mm256_mul_ps(hx, inv), cy = _mm256_mul_ps(hy, inv);
+    const __m256 j0x = _mm256_mul_ps(_mm256_sub_ps(_mm256_set1_ps(g.m0[0]), _mm256_mul_ps(cx, _mm256_set1_ps(g.m0[2]))), inv);
+    const __m256 j0y = _mm256_mul_ps(_mm256_sub_ps(_mm256_set1_ps(g.m0[1]), _mm256_mul_ps(cy, _mm256_set1_ps(g.m0[2]))), inv);
+    const __m256 j1x = _mm256_mul_ps(_mm256_sub_ps(_mm256_set1_ps(g.m1[0]), _mm256_mul_ps(cx, _mm256_set1_ps(g.m1[2]))), inv);
+    const __m256 j1y = _mm256_mul_ps(_mm256_sub_ps(_mm256_set1_ps(g.m1[1]), _mm256_mul_ps(cy, _mm256_set1_ps(g.m1[2]))), inv);
+    __m256 sum = _mm256_setzero_ps(), sum_sq = _mm256_setzero_ps(), cross = _mm256_setzero_ps();
+    int s = 0;
+    for (int bb = -r; bb <= r; ++bb)
+      for (int a = -r; a <= r; ++a, ++s) {
+        const __m256 fa = _mm256_set1_ps(static_cast<float>(a)), fb = _mm256_set1_ps(static_cast<float>(bb));
+        __m256 x = _mm256_sub_ps(_mm256_add_ps(cx, _mm256_add_ps(_mm256_mul_ps(fa, j0x), _mm256_mul_ps(fb, j1x))), half);
+        __m256 y = _mm256_sub_ps(_mm256_add_ps(cy, _mm256_add_ps(_mm256_mul_ps(fa, j0y), _mm256_mul_ps(fb, j1y))), half);
+        x = _mm256_blendv_ps(safe, x, ok_mask);
+        y = _mm256_blendv_ps(safe, y, ok_mask);
+        const __m256i x0 = _mm256_cvttps_epi32(x), y0 = _mm256_cvttps_epi32(y);
+        const __m256 ax = _mm256_sub_ps(x, _mm256_cvtepi32_ps(x0)), ay = _mm256_sub_ps(y, _mm256_cvtepi32_ps(y0));
+        const __m256i idx = _mm256_add_epi32(_mm256_mullo_epi32(y0, stride), x0);
+        const __m256 p00 = _mm256_i32gather_ps(g.grey, idx, 4);
+        const __m256 p01 = _mm256_i32gather_ps(g.grey + 1, idx, 4);
+        const __m256 p10 = _mm256_i32gather_ps(g.grey + g.stride, idx, 4);
+        const __m256 p11 = _mm256_i32gather_ps(g.grey + g.stride + 1, idx, 4);
+        const __m256 wx = _mm256_sub_ps(one, ax), wy = _mm256_sub_ps(one, ay);
+        const __m256 top = _mm256_add_ps(_mm256_mul_ps(wx, p00), _mm256_mul_ps(ax, p01));
+        const __m256 bottom = _mm256_add_ps(_mm256_mul_ps(wx, p10), _mm256_mul_ps(ax, p11));
+        const __m256 v = _mm256_add_ps(_mm256_mul_ps(wy, top), _mm256_mul_ps(ay, bottom));
+        sum = _mm256_add_ps(sum, v);
+        sum_sq = _mm256_add_ps(sum_sq, _mm256_mul_ps(v, v));
+        cross = _mm256_add_ps(cross, _mm256_mul_ps(v, _mm256_loadu_ps(ref_block + s * 8)));
+      }
+    const __m256 var = _mm256_sub_ps(sum_sq, _mm256_div_ps(_mm256_mul_ps(sum, sum), nf));
+    const __m256 zncc = _mm256_div_ps(cross, _mm256_mul_ps(_mm256_sqrt_ps(var), norm));
+    const __m256 value = _mm256_and_ps(zncc, _mm256_cmp_ps(var, _mm256_set1_ps(1e-12f), _CMP_GT_OQ));
+    alignas(32) float out[8];
+    _mm256_store_ps(out, value);
+    for (int l = 0; l < b.lanes; ++l)
+      if (b.inside[l]) score[l][k] += out[l];
+  }
+}
+#endif
+
+}  // namespace
+
 void PhotometricRefinementAccumulator::Add(const ViewImage& neighbor) {
   if (pixels_.empty() || !UsableImage(&neighbor)) return;
-  const cv::Mat grey = GreyOf(neighbor);
+  const cv::Mat grey = RefinementGrey(neighbor);
+  CV_Assert(grey.isContinuous() || grey.step[0] % sizeof(float) == 0);
   // x_j ~ K_j (R_rel · d K_ref⁻¹ p + t_rel) ∝ M p + ζ e with ζ = 1/d: linear in
   // the pixel and in the inverse depth.
   const PinholeView& ref = reference_view_;
@@ -124,62 +252,79 @@ void PhotometricRefinementAccumulator::Add(const ViewImage& neighbor) {
   const Eigen::Vector3d t_rel = nb.t - r_rel * ref.t;
   const Eigen::Matrix3f m = (nb.K * r_rel * ref.K_inv).cast<float>();
   const Eigen::Vector3f e = (nb.K * t_rel).cast<float>();
-  const int r = options_.patch_radius_px, n = (2 * r + 1) * (2 * r + 1);
-  const int hyps = 2 * options_.steps + 1;
-  const float zeta_step = static_cast<float>(zeta_step_);
+  ViewGeometry g;
+  g.grey = grey.ptr<float>(0);
+  g.stride = grey.step[0] / sizeof(float);
+  for (int c = 0; c < 3; ++c) {
+    g.e[c] = e[c];
+    g.m0[c] = m(c, 0);
+    g.m1[c] = m(c, 1);
+  }
+  g.zeta_step = static_cast<float>(zeta_step_);
+  g.steps = options_.steps;
+  g.radius = options_.patch_radius_px;
+  g.n = (2 * g.radius + 1) * (2 * g.radius + 1);
+  const int r = g.radius, hyps = 2 * options_.steps + 1;
   // Samples must fall where the bilinear 2x2 is inside: [0.5, size - 0.5).
   const float x_max = static_cast<float>(grey.cols) - 0.5f - 1e-3f, y_max = static_cast<float>(grey.rows) - 0.5f - 1e-3f;
   const Eigen::Vector3f m0 = m.col(0), m1 = m.col(1);
-
-  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, pixels_.size(), 256), [&](const tbb::blocked_range<std::size_t>& range) {
-    std::vector<float> samples(static_cast<std::size_t>(n * hyps));
-    for (std::size_t i = range.begin(); i != range.end(); ++i) {
-      const int px = pixels_[i] % cols_, py = pixels_[i] / cols_;
-      const Eigen::Vector3f centre =
-          m * Eigen::Vector3f(static_cast<float>(px) + 0.5f, static_cast<float>(py) + 0.5f, 1.0f) + zeta0_[i] * e;
-      // Every sample of every hypothesis inside the frame and in front of it, or the view is skipped for this pixel.
-      bool inside = true;
-      for (int k = 0; k < hyps && inside; k += hyps - 1) {
-        const Eigen::Vector3f h0 = centre + (static_cast<float>(k - options_.steps) * zeta_step) * e;
-        for (int corner = 0; corner < 4 && inside; ++corner) {
-          const float a = (corner & 1) ? static_cast<float>(r) : -static_cast<float>(r);
-          const float b = (corner & 2) ? static_cast<float>(r) : -static_cast<float>(r);
-          const Eigen::Vector3f h = h0 + a * m0 + b * m1;
-          if (!(h.z() > 0)) {
-            inside = false;
-            break;
-          }
-          const float x = h.x() / h.z(), y = h.y() / h.z();
-          if (!(x >= 0.5f && x < x_max && y >= 0.5f && y < y_max)) inside = false;
-        }
-      }
-      if (!inside) continue;
-      const float* ref_patch = &ref_patch_[i * static_cast<std::size_t>(n)];
-      float* score = &scores_[i * static_cast<std::size_t>(hyps)];
-      for (int k = 0; k < hyps; ++k) {
-        // Over a patch of a few pixels at <= 5° the plane's homography is affine
-        // to well under a hundredth of a pixel: positions = centre + a·J0 + b·J1.
-        const Eigen::Vector3f h0 = centre + (static_cast<float>(k - options_.steps) * zeta_step) * e;
-        const float inv0 = 1.0f / h0.z();
-        const float cx = h0.x() * inv0, cy = h0.y() * inv0;
-        const float j0x = (m0.x() - cx * m0.z()) * inv0, j0y = (m0.y() - cy * m0.z()) * inv0;
-        const float j1x = (m1.x() - cx * m1.z()) * inv0, j1y = (m1.y() - cy * m1.z()) * inv0;
-        float sum = 0, sum_sq = 0, cross = 0;
-        int s = 0;
-        for (int b = -r; b <= r; ++b) {
-          float x = cx - static_cast<float>(r) * j0x + static_cast<float>(b) * j1x;
-          float y = cy - static_cast<float>(r) * j0y + static_cast<float>(b) * j1y;
-          for (int a = -r; a <= r; ++a, ++s, x += j0x, y += j0y) {
-            const float v = SampleGrey(grey, x, y);
-            sum += v;
-            sum_sq += v * v;
-            cross += v * ref_patch[s];  // the reference patch is zero-mean: Σ(v − μ)·p = Σ v·p
+#ifdef LFRECON_REFINE_AVX2
+  const bool avx2 = options_.simd && RefinementCpuHasAvx2();
+#endif
+  const std::size_t blocks = (pixels_.size() + 7) / 8;
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, blocks, 32), [&](const tbb::blocked_range<std::size_t>& range) {
+    for (std::size_t blk = range.begin(); blk != range.end(); ++blk) {
+      BlockGeometry b;
+      b.lanes = static_cast<int>(std::min<std::size_t>(8, pixels_.size() - blk * 8));
+      bool any = false;
+      for (int l = 0; l < 8; ++l) {
+        b.centre_x[l] = b.centre_y[l] = 0;
+        b.centre_z[l] = 1;
+        if (l >= b.lanes) continue;
+        const std::size_t i = blk * 8 + static_cast<std::size_t>(l);
+        const int px = pixels_[i] % cols_, py = pixels_[i] / cols_;
+        const Eigen::Vector3f centre =
+            m * Eigen::Vector3f(static_cast<float>(px) + 0.5f, static_cast<float>(py) + 0.5f, 1.0f) + zeta0_[i] * e;
+        b.centre_x[l] = centre.x();
+        b.centre_y[l] = centre.y();
+        b.centre_z[l] = centre.z();
+        // Every sample of every hypothesis inside the frame and in front of it, or the view is skipped for this pixel.
+        bool inside = true;
+        for (int k = 0; k < hyps && inside; k += hyps - 1) {
+          const Eigen::Vector3f h0 = centre + (static_cast<float>(k - options_.steps) * g.zeta_step) * e;
+          for (int corner = 0; corner < 4 && inside; ++corner) {
+            const float a = (corner & 1) ? static_cast<float>(r) + 1 : -static_cast<float>(r) - 1;
+            const float bb = (corner & 2) ? static_cast<float>(r) + 1 : -static_cast<float>(r) - 1;
+            const Eigen::Vector3f h = h0 + a * m0 + bb * m1;
+            if (!(h.z() > 0) || !(h0.z() > 0)) {
+              inside = false;
+              break;
+            }
+            const float x = h.x() / h.z(), y = h.y() / h.z();
+            if (!(x >= 0.5f && x < x_max && y >= 0.5f && y < y_max)) inside = false;
           }
         }
-        const float var = sum_sq - sum * sum / static_cast<float>(n);
-        score[k] += var > 1e-12f ? cross / (std::sqrt(var) * ref_norm_[i]) : 0.0f;
+        b.inside[l] = inside;
+        any = any || inside;
       }
-      ++counts_[i];
+      if (!any) continue;
+      const float* ref_block = &ref_patch_[blk * 8 * static_cast<std::size_t>(g.n)];
+#ifdef LFRECON_REFINE_AVX2
+      if (avx2) {
+        float* score[8];
+        for (int l = 0; l < 8; ++l)
+          score[l] = l < b.lanes ? &scores_[(blk * 8 + static_cast<std::size_t>(l)) * static_cast<std::size_t>(hyps)] : nullptr;
+        ScoreBlockAvx2(g, b, ref_block, &ref_norm_[blk * 8], score);
+      } else
+#endif
+      {
+        for (int l = 0; l < b.lanes; ++l)
+          if (b.inside[l])
+            ScoreLaneScalar(g, b, l, ref_block, ref_norm_[blk * 8 + static_cast<std::size_t>(l)],
+                            &scores_[(blk * 8 + static_cast<std::size_t>(l)) * static_cast<std::size_t>(hyps)]);
+      }
+      for (int l = 0; l < b.lanes; ++l)
+        if (b.inside[l]) ++counts_[blk * 8 + static_cast<std::size_t>(l)];
     }
   });
 }

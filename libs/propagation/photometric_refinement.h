@@ -46,6 +46,9 @@ struct PhotometricRefinementOptions {
   double texture_min = 0.01;
   // At least this many neighbours must see a pixel's patch.
   int min_views = 2;
+  // Use AVX2 where the CPU has it (8 pixels at once; the same float
+  // operations in the same order as the scalar path, so the same depths).
+  bool simd = true;
 
   void Check() const;  // throws OptionError
 };
@@ -76,8 +79,8 @@ class PhotometricRefinementAccumulator {
   double zeta_step_ = 0;             // inverse-depth step between hypotheses (1/m)
   std::vector<int> pixels_;          // row-major index of each refined pixel
   std::vector<float> zeta0_;         // its inverse depth
-  std::vector<float> ref_patch_;     // its zero-mean reference patch, (2r+1)² per pixel
-  std::vector<float> ref_norm_;      // sqrt of the patch's sum of squares
+  std::vector<float> ref_patch_;     // zero-mean reference patches, (2r+1)² per pixel, by blocks of 8 pixels
+  std::vector<float> ref_norm_;      // sqrt of each patch's sum of squares (padded to whole blocks)
   std::vector<float> scores_;        // (2 steps + 1) ZNCC sums per pixel
   std::vector<int> counts_;          // neighbours that saw each pixel
 };

@@ -9,6 +9,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 #include <random>
 #include <vector>
 
@@ -31,7 +32,9 @@ PinholeView View(double centre_x) {
 // A smooth texture on the plane z = kTrueDepth (world metres), rendered at
 // every pixel centre exactly, so sub-pixel shifts are exact; `gain` scales it.
 ViewImage Render(double centre_x, float gain, bool textured = true) {
-  ViewImage v{View(centre_x), cv::Mat(kH, kW, CV_32FC3)};
+  ViewImage v;
+  v.view = View(centre_x);
+  v.image = cv::Mat(kH, kW, CV_32FC3);
   for (int r = 0; r < kH; ++r)
     for (int c = 0; c < kW; ++c) {
       const double x = centre_x + (c + 0.5 - kW / 2.0) / kFx * kTrueDepth;
@@ -113,6 +116,16 @@ TEST(PhotometricRefinement, OneNeighbourAtATimeGivesTheSameDepths) {
   for (auto it = chosen.rbegin(); it != chosen.rend(); ++it) acc.Add(s.neighbours[static_cast<std::size_t>(*it)]);
   acc.Finish(&one_by_one);
   EXPECT_LT(cv::norm(together.depth, one_by_one.depth, cv::NORM_INF), 1e-5);  // sums in another order
+}
+
+TEST(PhotometricRefinement, Avx2AndScalarPathsGiveTheSameBits) {
+  const Scene s;
+  PhotometricRefinementOptions scalar = Options(), simd = Options();
+  scalar.simd = false;
+  DepthMap a = Perturbed(13), b = Perturbed(13);
+  EXPECT_GT(RefineDepthPhotometrically(s.ref, s.Ptrs(), scalar, &a), 1000);
+  RefineDepthPhotometrically(s.ref, s.Ptrs(), simd, &b);
+  EXPECT_EQ(std::memcmp(a.depth.data, b.depth.data, a.depth.total() * sizeof(float)), 0);
 }
 
 TEST(PhotometricRefinement, LeavesKeptBackgroundAndUntexturedPixelsAlone) {
