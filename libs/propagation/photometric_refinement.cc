@@ -343,7 +343,12 @@ int PhotometricRefinementAccumulator::Finish(DepthMap* dense) {
     const float offset = curvature < 0 ? std::clamp(0.5f * (l - rr) / curvature, -0.5f, 0.5f) : 0.0f;
     const float zeta = zeta0_[i] + (static_cast<float>(best - options_.steps) + offset) * static_cast<float>(zeta_step_);
     if (!(zeta > 0)) continue;
-    dense->depth.at<float>(pixels_[i] / cols_, pixels_[i] % cols_) = 1.0f / zeta;
+    const int y = pixels_[i] / cols_, x = pixels_[i] % cols_;
+    dense->depth.at<float>(y, x) = 1.0f / zeta;
+    if (options_.raise_confidence && dense->confidence.size() == dense->depth.size()) {
+      float& confidence = dense->confidence.at<float>(y, x);
+      confidence = std::max(confidence, c / static_cast<float>(counts_[i]));
+    }
     ++changed;
   }
   return changed;
