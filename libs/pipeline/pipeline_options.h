@@ -54,9 +54,10 @@ struct PipelineOptions {
   // Each propagated foreground depth is searched again by ZNCC over the 4
   // widest-baseline neighbours within 5° (PhotometricRefinementOptions::views;
   // the library default stays 0 = off, as §4). Quality table
-  // (docs/benchmarks.md, "Dense depths searched again"): figurines F@2mm
-  // 0.684 -> 0.749, F@5mm 0.900 -> 0.926; figurines-noisy F@2 0.639 -> 0.699,
-  // F@5 0.888 -> 0.914; the four generated 320x180 sets within 0.005.
+  // (docs/benchmarks.md, "Dense depths searched again"), with the refined
+  // depths' confidences raised: figurines F@2mm 0.684 -> 0.782, F@5mm 0.900 ->
+  // 0.935; figurines-noisy F@2 0.639 -> 0.743, F@5 0.888 -> 0.924; the four
+  // generated 320x180 sets within 0.005.
   PropagationOptions propagation = [] {
     PropagationOptions p;
     p.photo.max_views = 12;
