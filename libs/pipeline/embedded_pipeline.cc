@@ -176,11 +176,7 @@ DepthMap DensifyNeighbourByNeighbour(const DepthPropagator& propagator, const Vi
   }
   if (options.refinement.views > 0) {  // third pass, likewise
     PhotometricRefinementAccumulator refine(options.refinement);
-    const std::vector<int> chosen = refine.SelectNeighbors(reference.view, views);
-    std::vector<const PinholeView*> selected;
-    for (int j : chosen) selected.push_back(views[static_cast<std::size_t>(j)]);
-    refine.Begin(reference, dense, selected, labelled.depth);
-    for_each_frame(chosen, [&](const ViewImage& v) { refine.Add(v); });
+    for_each_frame(refine.Begin(reference, dense, views, labelled.depth), [&](const ViewImage& v) { refine.Add(v); });
     refine.Finish(&dense);
   }
   return dense;

@@ -29,15 +29,6 @@ DenseConsistencyAccumulator::DenseConsistencyAccumulator(const DenseConsistencyO
   options_.Check();
 }
 
-namespace {
-
-const cv::Mat& Colours(const ViewImage& v) {
-  return !v.smoothed.empty() && v.smoothed.size() == v.image.size() && v.smoothed.type() == CV_32FC3 ? v.smoothed
-                                                                                                    : v.image;
-}
-
-}  // namespace
-
 std::vector<int> DenseConsistencyAccumulator::SelectNeighbors(
     const PinholeView& reference, const std::vector<const PinholeView*>& neighbors) const {
   return WidestNeighbors(reference, neighbors, options_.max_view_angle_deg, options_.views);
@@ -53,16 +44,6 @@ cv::Mat PatchMeans(const cv::Mat& bgr, int r) {
   return out;
 }
 
-// Grey levels of Colours(v) (CV_32F): the frame's own `grey` (PrepareViewImage,
-// of `smoothed`) when it has one, else computed the same way.
-cv::Mat Grey(const ViewImage& v) {
-  const cv::Mat& colours = Colours(v);
-  if (&colours == &v.smoothed && v.grey.size() == v.smoothed.size() && v.grey.type() == CV_32F) return v.grey;
-  cv::Mat grey;
-  cv::cvtColor(colours, grey, cv::COLOR_BGR2GRAY);
-  return grey;
-}
-
 }  // namespace
 
 void DenseConsistencyAccumulator::Begin(const ViewImage& reference, const DepthMap& dense, const cv::Mat& own) {
@@ -72,13 +53,13 @@ void DenseConsistencyAccumulator::Begin(const ViewImage& reference, const DepthM
   if (dense.depth.empty() || dense.depth.type() != CV_32F || reference.image.size() != dense.depth.size() ||
       reference.image.type() != CV_32FC3 || dense.label.size() != dense.depth.size())
     return;
-  const cv::Mat means = PatchMeans(Colours(reference), options_.patch_radius_px);
+  const cv::Mat means = PatchMeans(PhotometricColours(reference), options_.patch_radius_px);
   const bool skip_own = own.size() == dense.depth.size() && own.type() == CV_32F;
   const int nr = options_.ncc_radius_px;
   cv::Mat grey_mean, grey_sq_mean;
   reference_grey_.release();
   if (nr > 0) {
-    reference_grey_ = Grey(reference);
+    reference_grey_ = PhotometricGrey(reference);
     const cv::Size k(2 * nr + 1, 2 * nr + 1);
     cv::blur(reference_grey_, grey_mean, k, cv::Point(-1, -1), cv::BORDER_REPLICATE);
     cv::blur(reference_grey_.mul(reference_grey_), grey_sq_mean, k, cv::Point(-1, -1), cv::BORDER_REPLICATE);
@@ -113,7 +94,7 @@ void DenseConsistencyAccumulator::Add(const ViewImage& neighbor) {
   // The neighbour's patch means sampled at the projection of the pixel's
   // centre: at ≤ 5° the plane's mapping is locally a translation, so this is
   // the mean over the mapped patch, for one bilinear sample instead of (2r+1)².
-  const cv::Mat means = PatchMeans(Colours(neighbor), options_.patch_radius_px);
+  const cv::Mat means = PatchMeans(PhotometricColours(neighbor), options_.patch_radius_px);
   const int side = SideOf(reference_view_, neighbor.view);
   // A reference pixel x̃ on the plane fronto-parallel to the reference at
   // depth d lands at y = d·A·x̃ + a in the neighbour (A = K_j R_ji K_i⁻¹, a = K_j t_ji).
@@ -126,7 +107,7 @@ void DenseConsistencyAccumulator::Add(const ViewImage& neighbor) {
   const float max_x = static_cast<float>(means.cols) - margin, max_y = static_cast<float>(means.rows) - margin;
   const float inv2s2 = static_cast<float>(1.0 / (2.0 * options_.sigma * options_.sigma));
   const int nr = options_.ncc_radius_px;
-  const cv::Mat grey = nr > 0 ? Grey(neighbor) : cv::Mat();
+  const cv::Mat grey = nr > 0 ? PhotometricGrey(neighbor) : cv::Mat();
   const float n_samples = static_cast<float>((2 * nr + 1) * (2 * nr + 1));
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, pixels_.size(), 4096),
                     [&](const tbb::blocked_range<std::size_t>& range) {

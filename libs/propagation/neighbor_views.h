@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <cmath>
 #include <opencv2/core.hpp>
+#include <opencv2/imgproc.hpp>
 #include <vector>
 
 #include "depth/gradient_depth_estimator.h"
@@ -28,6 +29,23 @@ inline UsableNeighbors FindUsableNeighbors(const std::vector<const ViewImage*>& 
       out.views.push_back(&v->view);
     }
   return out;
+}
+
+// The colours the photometric checks read: `smoothed` when it is a CV_32FC3
+// copy of `image`'s size, else `image`.
+inline const cv::Mat& PhotometricColours(const ViewImage& v) {
+  return !v.smoothed.empty() && v.smoothed.size() == v.image.size() && v.smoothed.type() == CV_32FC3 ? v.smoothed
+                                                                                                    : v.image;
+}
+
+// Grey levels of PhotometricColours(v) (CV_32F): the frame's own `grey`
+// (PrepareViewImage, of `smoothed`) when it has one, else computed the same way.
+inline cv::Mat PhotometricGrey(const ViewImage& v) {
+  const cv::Mat& colours = PhotometricColours(v);
+  if (&colours == &v.smoothed && v.grey.size() == v.smoothed.size() && v.grey.type() == CV_32F) return v.grey;
+  cv::Mat grey;
+  cv::cvtColor(colours, grey, cv::COLOR_BGR2GRAY);
+  return grey;
 }
 
 // Degrees between the viewing directions, or a negative value when `nb` is

@@ -5,7 +5,6 @@
 
 #include <algorithm>
 #include <cmath>
-#include <opencv2/imgproc.hpp>
 
 #if defined(__x86_64__)
 #include <immintrin.h>
@@ -32,27 +31,9 @@ PhotometricRefinementAccumulator::PhotometricRefinementAccumulator(const Photome
   options_.Check();
 }
 
-std::vector<int> PhotometricRefinementAccumulator::SelectNeighbors(
-    const PinholeView& reference, const std::vector<const PinholeView*>& neighbors) const {
-  return WidestNeighbors(reference, neighbors, options_.max_view_angle_deg, options_.views);
-}
-
-namespace {
-
-// Grey levels (CV_32F) of the frame the photometric checks read: `smoothed`
-// when present (its own `grey` when that matches), else `image`.
-cv::Mat RefinementGrey(const ViewImage& v) {
-  const bool smoothed = !v.smoothed.empty() && v.smoothed.size() == v.image.size() && v.smoothed.type() == CV_32FC3;
-  if (smoothed && v.grey.size() == v.smoothed.size() && v.grey.type() == CV_32F) return v.grey;
-  cv::Mat grey;
-  cv::cvtColor(smoothed ? v.smoothed : v.image, grey, cv::COLOR_BGR2GRAY);
-  return grey;
-}
-
-}  // namespace
-
-void PhotometricRefinementAccumulator::Begin(const ViewImage& reference, const DepthMap& dense,
-                                             const std::vector<const PinholeView*>& selected, const cv::Mat& keep) {
+std::vector<int> PhotometricRefinementAccumulator::Begin(const ViewImage& reference, const DepthMap& dense,
+                                                         const std::vector<const PinholeView*>& neighbors,
+                                                         const cv::Mat& keep) {
   reference_view_ = reference.view;
   rows_ = dense.depth.rows;
   cols_ = dense.depth.cols;
@@ -63,17 +44,19 @@ void PhotometricRefinementAccumulator::Begin(const ViewImage& reference, const D
   scores_.clear();
   counts_.clear();
   zeta_step_ = 0;
-  if (options_.views <= 0 || dense.depth.empty() || reference.image.size() != dense.depth.size()) return;
+  if (options_.views <= 0 || dense.depth.empty() || reference.image.size() != dense.depth.size()) return {};
+  const std::vector<int> chosen =
+      WidestNeighbors(reference.view, neighbors, options_.max_view_angle_deg, options_.views);
   // The widest baseline's shift per unit inverse depth is about f·B.
   double baseline = 0;
-  for (const PinholeView* v : selected)
-    if (v) baseline = std::max(baseline, (v->Center() - reference.view.Center()).norm());
-  if (baseline <= 0) return;
+  for (int j : chosen)
+    baseline = std::max(baseline, (neighbors[static_cast<std::size_t>(j)]->Center() - reference.view.Center()).norm());
+  if (baseline <= 0) return {};
   zeta_step_ = options_.step_px / (reference.view.K(0, 0) * baseline);
 
   cv::Mat keep_mask;
   if (!keep.empty() && keep.size() == dense.depth.size()) keep_mask = keep != 0;
-  const cv::Mat grey = RefinementGrey(reference);
+  const cv::Mat grey = PhotometricGrey(reference);
   const int r = options_.patch_radius_px, n = (2 * r + 1) * (2 * r + 1);
   const float texture_min = static_cast<float>(options_.texture_min);
   std::vector<float> patch(static_cast<std::size_t>(n));
@@ -96,24 +79,23 @@ void PhotometricRefinementAccumulator::Begin(const ViewImage& reference, const D
         ss += v * v;
       }
       if (std::sqrt(ss / static_cast<float>(n)) < texture_min || ss <= 0) continue;
+      // Blocks of 8 pixels, each sample's 8 values side by side (the AVX2
+      // path loads them at once); norms padded to whole blocks.
+      const std::size_t i = pixels_.size();
+      if (i % 8 == 0) {
+        ref_patch_.resize(ref_patch_.size() + 8 * static_cast<std::size_t>(n), 0.0f);
+        ref_norm_.resize(ref_norm_.size() + 8, 1.0f);
+      }
+      float* block = &ref_patch_[(i / 8) * 8 * static_cast<std::size_t>(n)];
+      for (int s = 0; s < n; ++s) block[s * 8 + static_cast<int>(i % 8)] = patch[static_cast<std::size_t>(s)];
+      ref_norm_[i] = std::sqrt(ss);
       pixels_.push_back(y * cols_ + x);
       zeta0_.push_back(1.0f / d[x]);
-      ref_patch_.insert(ref_patch_.end(), patch.begin(), patch.end());
-      ref_norm_.push_back(std::sqrt(ss));
     }
   }
-  // Blocks of 8 pixels, each sample's 8 values side by side (the AVX2 path
-  // loads them at once); norms padded to whole blocks.
-  const std::size_t blocks = (pixels_.size() + 7) / 8;
-  std::vector<float> blocked(blocks * 8 * static_cast<std::size_t>(n), 0.0f);
-  for (std::size_t i = 0; i < pixels_.size(); ++i)
-    for (int s = 0; s < n; ++s)
-      blocked[((i / 8) * static_cast<std::size_t>(n) + static_cast<std::size_t>(s)) * 8 + i % 8] =
-          ref_patch_[i * static_cast<std::size_t>(n) + static_cast<std::size_t>(s)];
-  ref_patch_.swap(blocked);
-  ref_norm_.resize(blocks * 8, 1.0f);
   scores_.assign(pixels_.size() * static_cast<std::size_t>(2 * options_.steps + 1), 0.0f);
   counts_.assign(pixels_.size(), 0);
+  return pixels_.empty() ? std::vector<int>() : chosen;
 }
 
 namespace {
@@ -242,7 +224,7 @@ __attribute__((target("avx2"))) void ScoreBlockAvx2(const ViewGeometry& g, const
 
 void PhotometricRefinementAccumulator::Add(const ViewImage& neighbor) {
   if (pixels_.empty() || !UsableImage(&neighbor)) return;
-  const cv::Mat grey = RefinementGrey(neighbor);
+  const cv::Mat grey = PhotometricGrey(neighbor);
   CV_Assert(grey.isContinuous() || grey.step[0] % sizeof(float) == 0);
   // x_j ~ K_j (R_rel · d K_ref⁻¹ p + t_rel) ∝ M p + ζ e with ζ = 1/d: linear in
   // the pixel and in the inverse depth.
@@ -359,11 +341,7 @@ int RefineDepthPhotometrically(const ViewImage& reference, const std::vector<con
   if (options.views <= 0) return 0;
   const UsableNeighbors usable = FindUsableNeighbors(neighbors);
   PhotometricRefinementAccumulator acc(options);
-  const std::vector<int> chosen = acc.SelectNeighbors(reference.view, usable.views);
-  std::vector<const PinholeView*> selected;
-  for (int j : chosen) selected.push_back(usable.views[static_cast<std::size_t>(j)]);
-  acc.Begin(reference, *dense, selected, keep);
-  for (int j : chosen) acc.Add(*usable.images[static_cast<std::size_t>(j)]);
+  for (int j : acc.Begin(reference, *dense, usable.views, keep)) acc.Add(*usable.images[static_cast<std::size_t>(j)]);
   return acc.Finish(dense);
 }
 

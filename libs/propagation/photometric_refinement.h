@@ -61,21 +61,20 @@ struct PhotometricRefinementOptions {
   void Check() const;  // throws OptionError
 };
 
-// Begin(reference, dense, neighbour views), Add(neighbour) for each of
-// SelectNeighbors' views (any order), Finish(&dense): one neighbour's frame
-// at a time, so a caller need not hold them all at once. Reads each frame's
-// `grey` when it matches `smoothed`, else the grey levels of `smoothed`
-// (or `image` when there is no smoothed copy).
+// Begin(reference, dense, neighbour views) gives the neighbours to add;
+// Add(neighbour) for each of them (any order), Finish(&dense): one
+// neighbour's frame at a time, so a caller need not hold them all at once.
+// Reads each frame's PhotometricGrey (neighbor_views.h).
 class PhotometricRefinementAccumulator {
  public:
   explicit PhotometricRefinementAccumulator(const PhotometricRefinementOptions& options);
 
-  std::vector<int> SelectNeighbors(const PinholeView& reference, const std::vector<const PinholeView*>& neighbors) const;
-  // `selected`: the views that will be added (their widest baseline sets the
-  // step). Pixels where `keep` (CV_8U or CV_32F, optional) is non-zero are
-  // left alone.
-  void Begin(const ViewImage& reference, const DepthMap& dense, const std::vector<const PinholeView*>& selected,
-             const cv::Mat& keep = cv::Mat());
+  // Picks the `views` widest-baseline of `neighbors` (their widest baseline
+  // sets the step) and returns their indices, the ones to Add (none when
+  // nothing is to be refined). Pixels where `keep` (CV_8U or CV_32F,
+  // optional) is non-zero are left alone.
+  std::vector<int> Begin(const ViewImage& reference, const DepthMap& dense,
+                         const std::vector<const PinholeView*>& neighbors, const cv::Mat& keep = cv::Mat());
   void Add(const ViewImage& neighbor);
   // Changes the depths (and confidences) of the refined pixels; returns how many changed.
   int Finish(DepthMap* dense);

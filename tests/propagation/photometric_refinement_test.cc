@@ -118,11 +118,8 @@ TEST(PhotometricRefinement, OneNeighbourAtATimeGivesTheSameDepths) {
   PhotometricRefinementAccumulator acc(Options());
   std::vector<const PinholeView*> views;
   for (const ViewImage& v : s.neighbours) views.push_back(&v.view);
-  const std::vector<int> chosen = acc.SelectNeighbors(s.ref.view, views);
+  const std::vector<int> chosen = acc.Begin(s.ref, one_by_one, views);
   ASSERT_EQ(chosen.size(), 4u);
-  std::vector<const PinholeView*> selected;
-  for (int j : chosen) selected.push_back(views[static_cast<std::size_t>(j)]);
-  acc.Begin(s.ref, one_by_one, selected);
   for (auto it = chosen.rbegin(); it != chosen.rend(); ++it) acc.Add(s.neighbours[static_cast<std::size_t>(*it)]);
   acc.Finish(&one_by_one);
   EXPECT_LT(cv::norm(together.depth, one_by_one.depth, cv::NORM_INF), 1e-5);  // sums in another order
