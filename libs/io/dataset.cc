@@ -17,6 +17,7 @@
 
 #include "geometry/undistorter.h"
 #include "io/colmap_model.h"
+#include "io/file_bytes.h"
 #include "io/image_header.h"
 #include "io/input_text.h"
 #include "io/json_file.h"
@@ -187,9 +188,8 @@ std::optional<std::pair<int, int>> ImageFileSize(const fs::path& path) {
   bytes.resize(static_cast<std::size_t>(in.gcount()));
   if (const auto h = ReadImageHeader(bytes); h && h->width > 0 && h->height > 0)
     return std::make_pair(h->width, h->height);
-  in.clear();
-  in.seekg(0);
-  const std::string all((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  in.close();
+  const std::string all = ReadFileBytes(path);
   if (const auto h = ReadImageHeader(all)) {  // a JPEG whose frame header lies beyond 1 MiB
     if (h->width > 0 && h->height > 0) return std::make_pair(h->width, h->height);
     throw InputError(path.string(), "the " + h->format + " header gives no image size");

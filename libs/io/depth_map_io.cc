@@ -14,6 +14,7 @@
 #include <opencv2/imgproc.hpp>
 #include <string>
 
+#include "io/file_bytes.h"
 #include "io/input_text.h"
 #include "util/error.h"
 #include "util/path.h"
@@ -68,9 +69,7 @@ void WritePfm(const fs::path& path, const cv::Mat& map) {
 
 cv::Mat ReadPfm(const fs::path& path) {
   const std::string file = path.string();
-  std::ifstream in(path, std::ios::binary);
-  if (!in) throw InputError(file, "cannot open file");
-  const std::string data((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  const std::string data = ReadFileBytes(path);
   // Header: three whitespace-separated tokens after the magic, then one whitespace byte.
   size_t pos = 0;
   auto token = [&](const char* what) {

@@ -14,6 +14,7 @@
 #include <opencv2/videoio.hpp>
 
 #include "io/depth_map_io.h"
+#include "io/file_bytes.h"
 #include "io/image_header.h"
 #include "util/error.h"
 #include "util/path.h"
@@ -229,15 +230,8 @@ cv::Mat ReadImageFloat(const fs::path& path, std::optional<cv::Size> expect) {
   std::error_code ec;
   if (!fs::is_regular_file(path, ec)) throw InputError(file, "image file does not exist");
   if (LowerExtension(path) == ".exr") EnableOpenCvExr();
-  std::string bytes;
-  {
-    std::ifstream in(path, std::ios::binary);
-    if (!in) throw InputError(file, "cannot open image file");
-    bytes.assign(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
-    if (in.bad()) throw InputError(file, "read failed");
-    if (bytes.size() > static_cast<std::size_t>(std::numeric_limits<int>::max()))
-      throw InputError(file, "image file larger than 2 GiB");
-  }
+  // cv::imdecode takes the bytes' count as an int.
+  std::string bytes = ReadFileBytes(path, static_cast<std::uintmax_t>(std::numeric_limits<int>::max()));
   // PNG/JPEG from the bytes read; other formats from the file (some OpenCV decoders read files only).
   if (ReadImageHeader(bytes)) return DecodeImageFloat(bytes, file, expect);
   // Any other format: its size from its header too, before a pixel is decoded

@@ -9,6 +9,7 @@
 #include <iterator>
 
 #include "io/depth_map_io.h"
+#include "io/file_bytes.h"
 #include "io/frame_source.h"
 #include "util/error.h"
 
@@ -220,9 +221,7 @@ std::pair<long long, long long> OtherImageSize(const std::filesystem::path& file
 }
 
 std::pair<long long, long long> ImageFileHeaderSize(const std::filesystem::path& file) {
-  std::ifstream in(file, std::ios::binary);
-  if (!in) throw InputError(file.string(), "cannot open image file");
-  const std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  const std::string bytes = ReadFileBytes(file);
   if (const auto h = ReadImageHeader(bytes)) {
     if (h->width <= 0 || h->height <= 0)
       throw InputError(file.string(), "the " + h->format + " header gives no image size");

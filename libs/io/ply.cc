@@ -15,6 +15,7 @@
 #include <string>
 #include <vector>
 
+#include "io/file_bytes.h"
 #include "io/input_text.h"
 #include "util/error.h"
 
@@ -160,14 +161,6 @@ class PlyBody {
   PlyFormat format_;
 };
 
-std::string ReadWholeFile(const fs::path& path) {
-  std::ifstream in(path, std::ios::binary);
-  if (!in) throw InputError(path.string(), "cannot open file");
-  std::string data((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
-  if (in.bad()) throw InputError(path.string(), "read failed");
-  return data;
-}
-
 int PropertyIndex(const PlyElement& e, std::initializer_list<const char*> names) {
   for (size_t i = 0; i < e.properties.size(); ++i)
     for (const char* n : names)
@@ -181,7 +174,7 @@ TriangleMesh ReadPly(const fs::path& path) {
   const std::string file = path.string();
   std::error_code ec;
   if (!fs::is_regular_file(path, ec)) throw InputError(file, "PLY file does not exist");
-  const std::string data = ReadWholeFile(path);
+  const std::string data = ReadFileBytes(path);
 
   // Header: lines up to "end_header".
   size_t pos = 0;
