@@ -39,6 +39,8 @@ std::vector<int> PhotometricRefinementAccumulator::Begin(const ViewImage& refere
   cols_ = dense.depth.cols;
   pixels_.clear();
   zeta0_.clear();
+  slope_x_.clear();
+  slope_y_.clear();
   ref_patch_.clear();
   ref_norm_.clear();
   scores_.clear();
@@ -91,6 +93,31 @@ std::vector<int> PhotometricRefinementAccumulator::Begin(const ViewImage& refere
       ref_norm_[i] = std::sqrt(ss);
       pixels_.push_back(y * cols_ + x);
       zeta0_.push_back(1.0f / d[x]);
+      float sx = 0, sy = 0;
+      if (options_.slanted) {
+        const float z0 = 1.0f / d[x];
+        // The inverse depth at (x + dx, y + dy) when it is foreground and within 10 % of z0.
+        auto zeta_at = [&](int dx, int dy, float* z) {
+          const float v = dense.depth.at<float>(y + dy, x + dx);
+          if (!(v > 0)) return false;
+          if (!dense.label.empty() && dense.label.at<std::uint8_t>(y + dy, x + dx) !=
+                                          static_cast<std::uint8_t>(DepthLabel::kForeground))
+            return false;
+          *z = 1.0f / v;
+          return std::abs(*z - z0) <= 0.1f * z0;
+        };
+        // A slope only where the map is planar across the patch (its second
+        // difference within 0.25 % of z0): noisy depths give no tilt.
+        auto slope = [&](int dx, int dy) {
+          float za, zb;
+          if (!zeta_at(dx, dy, &za) || !zeta_at(-dx, -dy, &zb) || std::abs(za + zb - 2 * z0) > 0.0025f * z0) return 0.0f;
+          return (za - zb) / static_cast<float>(2 * r);
+        };
+        sx = slope(r, 0);
+        sy = slope(0, r);
+      }
+      slope_x_.push_back(sx);
+      slope_y_.push_back(sy);
     }
   }
   scores_.assign(pixels_.size() * static_cast<std::size_t>(2 * options_.steps + 1), 0.0f);
@@ -105,12 +132,15 @@ struct BlockGeometry {
   int lanes = 0;
   bool inside[8] = {};                      // the view sees every sample of every hypothesis
   float centre_x[8], centre_y[8], centre_z[8];  // M p + ζ0 e
+  // The homography's columns for the patch's x and y offsets: M's first two
+  // columns plus the plane's inverse-depth slope times e (M_0 + ζ_x e, M_1 + ζ_y e).
+  float m0x[8], m0y[8], m0z[8], m1x[8], m1y[8], m1z[8];
 };
 
 struct ViewGeometry {
   const float* grey = nullptr;
   std::size_t stride = 0;  // floats per row
-  float e[3], m0[3], m1[3];
+  float e[3];
   float zeta_step = 0;
   int steps = 0, radius = 0, n = 0;
 };
@@ -129,8 +159,8 @@ void ScoreLaneScalar(const ViewGeometry& g, const BlockGeometry& b, int lane, co
     const float hx = b.centre_x[lane] + t * g.e[0], hy = b.centre_y[lane] + t * g.e[1], hz = b.centre_z[lane] + t * g.e[2];
     const float inv = 1.0f / hz;
     const float cx = hx * inv, cy = hy * inv;
-    const float j0x = (g.m0[0] - cx * g.m0[2]) * inv, j0y = (g.m0[1] - cy * g.m0[2]) * inv;
-    const float j1x = (g.m1[0] - cx * g.m1[2]) * inv, j1y = (g.m1[1] - cy * g.m1[2]) * inv;
+    const float j0x = (b.m0x[lane] - cx * b.m0z[lane]) * inv, j0y = (b.m0y[lane] - cy * b.m0z[lane]) * inv;
+    const float j1x = (b.m1x[lane] - cx * b.m1z[lane]) * inv, j1y = (b.m1y[lane] - cy * b.m1z[lane]) * inv;
     float sum = 0, sum_sq = 0, cross = 0;
     int s = 0;
     for (int bb = -r; bb <= r; ++bb)
@@ -172,6 +202,8 @@ __attribute__((target("avx2"))) void ScoreBlockAvx2(const ViewGeometry& g, const
   }
   const __m256 bx = _mm256_loadu_ps(b.centre_x), by = _mm256_loadu_ps(b.centre_y), bz = _mm256_loadu_ps(b.centre_z);
   const __m256 norm = _mm256_loadu_ps(ref_norm);
+  const __m256 m0x = _mm256_loadu_ps(b.m0x), m0y = _mm256_loadu_ps(b.m0y), m0z = _mm256_loadu_ps(b.m0z);
+  const __m256 m1x = _mm256_loadu_ps(b.m1x), m1y = _mm256_loadu_ps(b.m1y), m1z = _mm256_loadu_ps(b.m1z);
   const __m256i stride = _mm256_set1_epi32(static_cast<int>(g.stride));
   const __m256 safe = _mm256_set1_ps(0.75f);  // a position inside any frame of 2x2 pixels or more
   for (int k = 0; k <= 2 * g.steps; ++k) {
@@ -181,10 +213,10 @@ __attribute__((target("avx2"))) void ScoreBlockAvx2(const ViewGeometry& g, const
     const __m256 hz = _mm256_add_ps(bz, _mm256_mul_ps(t, _mm256_set1_ps(g.e[2])));
     const __m256 inv = _mm256_div_ps(one, hz);
     const __m256 cx = _mm256_mul_ps(hx, inv), cy = _mm256_mul_ps(hy, inv);
-    const __m256 j0x = _mm256_mul_ps(_mm256_sub_ps(_mm256_set1_ps(g.m0[0]), _mm256_mul_ps(cx, _mm256_set1_ps(g.m0[2]))), inv);
-    const __m256 j0y = _mm256_mul_ps(_mm256_sub_ps(_mm256_set1_ps(g.m0[1]), _mm256_mul_ps(cy, _mm256_set1_ps(g.m0[2]))), inv);
-    const __m256 j1x = _mm256_mul_ps(_mm256_sub_ps(_mm256_set1_ps(g.m1[0]), _mm256_mul_ps(cx, _mm256_set1_ps(g.m1[2]))), inv);
-    const __m256 j1y = _mm256_mul_ps(_mm256_sub_ps(_mm256_set1_ps(g.m1[1]), _mm256_mul_ps(cy, _mm256_set1_ps(g.m1[2]))), inv);
+    const __m256 j0x = _mm256_mul_ps(_mm256_sub_ps(m0x, _mm256_mul_ps(cx, m0z)), inv);
+    const __m256 j0y = _mm256_mul_ps(_mm256_sub_ps(m0y, _mm256_mul_ps(cy, m0z)), inv);
+    const __m256 j1x = _mm256_mul_ps(_mm256_sub_ps(m1x, _mm256_mul_ps(cx, m1z)), inv);
+    const __m256 j1y = _mm256_mul_ps(_mm256_sub_ps(m1y, _mm256_mul_ps(cy, m1z)), inv);
     __m256 sum = _mm256_setzero_ps(), sum_sq = _mm256_setzero_ps(), cross = _mm256_setzero_ps();
     int s = 0;
     for (int bb = -r; bb <= r; ++bb)
@@ -237,11 +269,7 @@ void PhotometricRefinementAccumulator::Add(const ViewImage& neighbor) {
   ViewGeometry g;
   g.grey = grey.ptr<float>(0);
   g.stride = grey.step[0] / sizeof(float);
-  for (int c = 0; c < 3; ++c) {
-    g.e[c] = e[c];
-    g.m0[c] = m(c, 0);
-    g.m1[c] = m(c, 1);
-  }
+  for (int c = 0; c < 3; ++c) g.e[c] = e[c];
   g.zeta_step = static_cast<float>(zeta_step_);
   g.steps = options_.steps;
   g.radius = options_.patch_radius_px;
@@ -262,8 +290,15 @@ void PhotometricRefinementAccumulator::Add(const ViewImage& neighbor) {
       for (int l = 0; l < 8; ++l) {
         b.centre_x[l] = b.centre_y[l] = 0;
         b.centre_z[l] = 1;
+        b.m0x[l] = m0.x(), b.m0y[l] = m0.y(), b.m0z[l] = m0.z();
+        b.m1x[l] = m1.x(), b.m1y[l] = m1.y(), b.m1z[l] = m1.z();
         if (l >= b.lanes) continue;
         const std::size_t i = blk * 8 + static_cast<std::size_t>(l);
+        // The plane's columns (M_0 + ζ_x e, M_1 + ζ_y e); M's own when fronto-parallel.
+        const Eigen::Vector3f pm0 = slope_x_[i] != 0 ? Eigen::Vector3f(m0 + slope_x_[i] * e) : m0;
+        const Eigen::Vector3f pm1 = slope_y_[i] != 0 ? Eigen::Vector3f(m1 + slope_y_[i] * e) : m1;
+        b.m0x[l] = pm0.x(), b.m0y[l] = pm0.y(), b.m0z[l] = pm0.z();
+        b.m1x[l] = pm1.x(), b.m1y[l] = pm1.y(), b.m1z[l] = pm1.z();
         const int px = pixels_[i] % cols_, py = pixels_[i] / cols_;
         const Eigen::Vector3f centre =
             m * Eigen::Vector3f(static_cast<float>(px) + 0.5f, static_cast<float>(py) + 0.5f, 1.0f) + zeta0_[i] * e;
@@ -277,7 +312,7 @@ void PhotometricRefinementAccumulator::Add(const ViewImage& neighbor) {
           for (int corner = 0; corner < 4 && inside; ++corner) {
             const float a = (corner & 1) ? static_cast<float>(r) + 1 : -static_cast<float>(r) - 1;
             const float bb = (corner & 2) ? static_cast<float>(r) + 1 : -static_cast<float>(r) - 1;
-            const Eigen::Vector3f h = h0 + a * m0 + bb * m1;
+            const Eigen::Vector3f h = h0 + a * pm0 + bb * pm1;
             if (!(h.z() > 0) || !(h0.z() > 0)) {
               inside = false;
               break;

@@ -7,7 +7,8 @@
 //                     [--iterations N] [--min-confidence C] [--presmooth S] [--max-views N] [--[no-]centre-consistency] [--model constant|affine]
 //                     [--ridge PX] [--extrapolation-m0 M] [--extrapolation-floor PX] [--paper] [--no-depth-confidence] [--no-keep-edge-depths]
 //                     [--no-inverse-depth] [--two-sided] [--no-silhouette-splat-only] [--no-keep-blocked-silhouettes] [--oracle-depth]
-//                     [--upscale F] [--repeat R]
+//                     [--upscale F] [--repeat R] [--refine-views N] [--refine-steps N] [--refine-step-px P]
+//                     [--refine-radius R] [--refine-ncc-min Z] [--refine-fronto-parallel]
 // Options apply in order: --paper resets to PaperPropagationOptions(), later flags change it.
 // --upscale F scales frames (bicubic), the filtered maps and ground truth
 // (nearest) and the cameras by F, to time propagation at F× the resolution.
@@ -117,6 +118,7 @@ int main(int argc, char** argv) {
     else if (is("--refine-step-px")) popt.refinement.step_px = std::atof(argv[++a]);
     else if (is("--refine-radius")) popt.refinement.patch_radius_px = std::atoi(argv[++a]);
     else if (is("--refine-ncc-min")) popt.refinement.ncc_min = std::atof(argv[++a]);
+    else if (!std::strcmp(argv[a], "--refine-fronto-parallel")) popt.refinement.slanted = false;
     else if (is("--consistency-min")) popt.consistency.rho_min = std::atof(argv[++a]);
     else if (is("--consistency-patch")) popt.consistency.patch_radius_px = std::atoi(argv[++a]);
     else if (!std::strcmp(argv[a], "--consistency-stats")) consistency_stats = true;

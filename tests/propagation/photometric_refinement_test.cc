@@ -9,6 +9,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <cstring>
 #include <random>
 #include <vector>
@@ -29,16 +30,25 @@ PinholeView View(double centre_x) {
   return v;
 }
 
-// A smooth texture on the plane z = kTrueDepth (world metres), rendered at
-// every pixel centre exactly, so sub-pixel shifts are exact; `gain` scales it.
-ViewImage Render(double centre_x, float gain, bool textured = true) {
+// The depth along the ray of pixel (c, r) of the view centred at centre_x to
+// the plane z = kTrueDepth + slope x (world metres; slope 0: fronto-parallel).
+double PlaneDepth(double centre_x, double slope, int r, int c) {
+  (void)r;
+  const double dx = (c + 0.5 - kW / 2.0) / kFx;
+  return (kTrueDepth + slope * centre_x) / (1 - slope * dx);
+}
+
+// A smooth texture on the plane z = kTrueDepth + slope x, rendered at every
+// pixel centre exactly, so sub-pixel shifts are exact; `gain` scales it.
+ViewImage Render(double centre_x, float gain, bool textured = true, double slope = 0) {
   ViewImage v;
   v.view = View(centre_x);
   v.image = cv::Mat(kH, kW, CV_32FC3);
   for (int r = 0; r < kH; ++r)
     for (int c = 0; c < kW; ++c) {
-      const double x = centre_x + (c + 0.5 - kW / 2.0) / kFx * kTrueDepth;
-      const double y = (r + 0.5 - kH / 2.0) / kFx * kTrueDepth;
+      const double z = PlaneDepth(centre_x, slope, r, c);
+      const double x = centre_x + (c + 0.5 - kW / 2.0) / kFx * z;
+      const double y = (r + 0.5 - kH / 2.0) / kFx * z;
       const double t = textured ? 0.5 + 0.15 * std::sin(2 * M_PI * x / 0.037) +
                                       0.1 * std::sin(2 * M_PI * (0.6 * x + y) / 0.053) +
                                       0.05 * std::cos(2 * M_PI * (x - 0.8 * y) / 0.021)
@@ -159,6 +169,69 @@ TEST(PhotometricRefinement, LeavesKeptBackgroundAndUntexturedPixelsAlone) {
   PhotometricRefinementOptions o = Options();
   o.views = 0;
   EXPECT_EQ(RefineDepthPhotometrically(s.ref, s.Ptrs(), o, &off), 0);
+}
+
+// A plane at 50° to the image (z = 1 + 1.2 x) with a smooth ±2 % depth error,
+// as a propagated map has: patches tilted by the map's own slope find it more
+// closely than fronto-parallel ones, whose shape is wrong in every neighbour.
+TEST(PhotometricRefinement, SlantedPatchesFollowATiltedPlane) {
+  constexpr double kSlope = 1.2;
+  const ViewImage ref = Render(0, 1.0f, true, kSlope);
+  const std::vector<ViewImage> nbs{Render(-0.04, 1.0f, true, kSlope), Render(-0.02, 1.0f, true, kSlope),
+                                   Render(0.02, 1.1f, true, kSlope), Render(0.04, 1.0f, true, kSlope)};
+  const std::vector<const ViewImage*> ptrs{&nbs[0], &nbs[1], &nbs[2], &nbs[3]};
+  auto smooth_error = [&] {
+    DepthMap map(kH, kW);
+    for (int r = 0; r < kH; ++r)
+      for (int c = 0; c < kW; ++c)
+        map.depth.at<float>(r, c) =
+            static_cast<float>(PlaneDepth(0, kSlope, r, c) * (1 + 0.02 * std::sin(2 * M_PI * (c + 0.5 * r) / 160.0)));
+    map.confidence.setTo(0.5);
+    map.label.setTo(static_cast<int>(DepthLabel::kForeground));
+    return map;
+  };
+  // Share of the interior within `tol` of the plane.
+  auto within = [&](const DepthMap& map, double tol) {
+    int ok = 0, n = 0;
+    for (int r = 8; r < kH - 8; ++r)
+      for (int c = 24; c < kW - 24; ++c, ++n) {
+        const double truth = PlaneDepth(0, kSlope, r, c);
+        ok += std::abs(map.depth.at<float>(r, c) - truth) <= tol * truth;
+      }
+    return static_cast<double>(ok) / n;
+  };
+  DepthMap fronto = smooth_error(), slanted = smooth_error(), scalar = smooth_error();
+  EXPECT_LT(within(fronto, 0.005), 0.3);
+  PhotometricRefinementOptions o = Options();
+  o.slanted = false;
+  RefineDepthPhotometrically(ref, ptrs, o, &fronto);
+  o.slanted = true;
+  RefineDepthPhotometrically(ref, ptrs, o, &slanted);
+  // Mean relative error over the interior.
+  auto mean_error = [&](const DepthMap& map) {
+    double sum = 0;
+    int n = 0;
+    for (int r = 8; r < kH - 8; ++r)
+      for (int c = 24; c < kW - 24; ++c, ++n) {
+        const double truth = PlaneDepth(0, kSlope, r, c);
+        sum += std::abs(map.depth.at<float>(r, c) - truth) / truth;
+      }
+    return sum / n;
+  };
+  // Measured: mean error 0.00219 / 0.00168, within 0.3 % 0.730 / 0.852, within
+  // 0.5 % 0.942 / 0.978 (fronto-parallel / slanted). Sub-0.2 % is the bilinear
+  // samples' limit on this compressed texture (0.016 px in the widest view)
+  // and is not asserted.
+  std::printf("fronto-parallel / slanted: mean relative error %.5f / %.5f, within 0.3 %% %.4f / %.4f, within 0.5 %% %.4f / %.4f\n",
+              mean_error(fronto), mean_error(slanted), within(fronto, 0.003), within(slanted, 0.003),
+              within(fronto, 0.005), within(slanted, 0.005));
+  EXPECT_LT(mean_error(slanted), 0.85 * mean_error(fronto));
+  EXPECT_GT(within(slanted, 0.003), within(fronto, 0.003) + 0.08);
+  EXPECT_GT(within(slanted, 0.005), 0.96);
+  // The AVX2 path tilts its patches the same way, bit for bit.
+  o.simd = false;
+  RefineDepthPhotometrically(ref, ptrs, o, &scalar);
+  EXPECT_EQ(std::memcmp(scalar.depth.data, slanted.depth.data, scalar.depth.total() * sizeof(float)), 0);
 }
 
 TEST(PhotometricRefinement, ChecksItsOptions) {
