@@ -3,8 +3,9 @@
 // foreground depth is searched again over a short range of inverse depths
 // around its own, scoring each hypothesis by the zero-mean normalised
 // cross-correlation (ZNCC) of the reference's grey (2r+1)² patch with the
-// neighbours' patches where the plane fronto-parallel to the reference at that
-// depth maps it, averaged over the widest-baseline neighbours; a parabola
+// neighbours' patches where the plane through that depth maps it (tilted by
+// the map's own slope where the map is planar, `slanted`; else fronto-
+// parallel), averaged over the widest-baseline neighbours; a parabola
 // through the best hypothesis and its two neighbours gives the new depth. Why:
 // the depth from gradients measures each edge pixel's shift along one line
 // and propagation interpolates between edges, so a dense depth is within 0.5 %
