@@ -1,12 +1,12 @@
 #include "io/file_bytes.h"
 
 #include <gtest/gtest.h>
-#include <unistd.h>
 
 #include <filesystem>
 #include <fstream>
 #include <string>
 
+#include "common/test_util.h"
 #include "util/error.h"
 
 namespace lfrecon {
@@ -14,8 +14,7 @@ namespace {
 
 namespace fs = std::filesystem;
 
-fs::path TempFile(const std::string& name, const std::string& bytes) {
-  const fs::path p = fs::temp_directory_path() / ("lfrecon_file_bytes_" + std::to_string(::getpid()) + "_" + name);
+fs::path WriteFile(const fs::path& p, const std::string& bytes) {
   std::ofstream(p, std::ios::binary).write(bytes.data(), static_cast<std::streamsize>(bytes.size()));
   return p;
 }
@@ -23,14 +22,14 @@ fs::path TempFile(const std::string& name, const std::string& bytes) {
 TEST(ReadFileBytes, ReturnsEveryByteOfABinaryFile) {
   std::string bytes;
   for (int i = 0; i < 3 * 1000 * 1000 + 7; ++i) bytes.push_back(static_cast<char>((i * 131) % 256));  // zeros too
-  const fs::path p = TempFile("binary", bytes);
-  EXPECT_EQ(ReadFileBytes(p), bytes);
-  EXPECT_EQ(ReadFileBytes(TempFile("empty", "")), "");
-  fs::remove(p);
+  const testing::TempDir dir;
+  EXPECT_EQ(ReadFileBytes(WriteFile(dir.path() / "binary", bytes)), bytes);
+  EXPECT_EQ(ReadFileBytes(WriteFile(dir.path() / "empty", "")), "");
 }
 
 TEST(ReadFileBytes, RefusesAFileOverTheLimitNamingIt) {
-  const fs::path p = TempFile("large", std::string(5000, 'x'));
+  const testing::TempDir dir;
+  const fs::path p = WriteFile(dir.path() / "large", std::string(5000, 'x'));
   EXPECT_EQ(ReadFileBytes(p, 5000).size(), 5000u);
   try {
     ReadFileBytes(p, 4999);
@@ -39,7 +38,6 @@ TEST(ReadFileBytes, RefusesAFileOverTheLimitNamingIt) {
     EXPECT_EQ(e.file(), p.string());
     EXPECT_NE(std::string(e.what()).find("larger than 4999 bytes"), std::string::npos) << e.what();
   }
-  fs::remove(p);
 }
 
 TEST(ReadFileBytes, ReadsFilesWhoseSizeIsUnknown) {
@@ -50,7 +48,8 @@ TEST(ReadFileBytes, ReadsFilesWhoseSizeIsUnknown) {
 }
 
 TEST(ReadFileBytes, NamesAMissingFile) {
-  const fs::path p = fs::temp_directory_path() / "lfrecon_file_bytes_no_such_file";
+  const testing::TempDir dir;
+  const fs::path p = dir.path() / "no_such_file";
   try {
     ReadFileBytes(p);
     FAIL();

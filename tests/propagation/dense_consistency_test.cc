@@ -7,21 +7,15 @@
 
 #include <random>
 
+#include "common/shifted_view.h"
+
 namespace lfrecon {
 namespace {
 
 constexpr int kW = 96, kH = 48;
 constexpr double kFx = 100, kBaseline = 0.05, kTrueDepth = 1.0;  // disparity 5 px
 
-PinholeView View(double centre_x) {
-  PinholeView v;
-  v.width = kW;
-  v.height = kH;
-  v.K << kFx, 0, kW / 2.0, 0, kFx, kH / 2.0, 0, 0, 1;
-  v.K_inv = v.K.inverse();
-  v.t = Eigen::Vector3d(-centre_x, 0, 0);  // cam_from_world: camera centre at (centre_x, 0, 0)
-  return v;
-}
+PinholeView View(double centre_x) { return testing::ShiftedView(kW, kH, kFx, centre_x); }
 
 // Grey white noise (std ~0.04 around 0.5), the same in B, G, R; `shift` px to
 // the left of `base` (a fronto-parallel plane at kTrueDepth seen from the

@@ -14,21 +14,15 @@
 #include <random>
 #include <vector>
 
+#include "common/shifted_view.h"
+
 namespace lfrecon {
 namespace {
 
 constexpr int kW = 128, kH = 64;
 constexpr double kFx = 200, kTrueDepth = 1.0;
 
-PinholeView View(double centre_x) {
-  PinholeView v;
-  v.width = kW;
-  v.height = kH;
-  v.K << kFx, 0, kW / 2.0, 0, kFx, kH / 2.0, 0, 0, 1;
-  v.K_inv = v.K.inverse();
-  v.t = Eigen::Vector3d(-centre_x, 0, 0);  // cam_from_world: camera centre at (centre_x, 0, 0)
-  return v;
-}
+PinholeView View(double centre_x) { return testing::ShiftedView(kW, kH, kFx, centre_x); }
 
 // The depth along the ray of pixel (c, r) of the view centred at centre_x to
 // the plane z = kTrueDepth + slope x (world metres; slope 0: fronto-parallel).
