@@ -17,7 +17,6 @@
 
 #include "geometry/undistorter.h"
 #include "io/colmap_model.h"
-#include "io/file_bytes.h"
 #include "io/image_header.h"
 #include "io/input_text.h"
 #include "io/json_file.h"
@@ -175,26 +174,12 @@ struct PoseEntry {
 // Nerfstudio-style split files, in this order, when a folder has no transforms.json.
 const char* const kTransformsSplits[] = {"transforms_train.json", "transforms_val.json", "transforms_test.json"};
 
-// The size of an image file from its PNG/JPEG header (the first 1 MiB is
-// enough for any JPEG's frame header after its EXIF data), else from its
-// header of another format (image_header.h; read whole: a TIFF's directory
-// may follow its pixels), never by decoding it. InputError naming the file
-// when its format's header gives no size.
+// The size of an image file from its header (ImageFileHeaderSize), never by
+// decoding it; nullopt when it cannot be opened. InputError naming the file
+// when its format's header gives no size, or one beyond an int.
 std::optional<std::pair<int, int>> ImageFileSize(const fs::path& path) {
-  std::ifstream in(path, std::ios::binary);
-  if (!in) return std::nullopt;
-  std::string bytes(1 << 20, '\0');
-  in.read(bytes.data(), static_cast<std::streamsize>(bytes.size()));
-  bytes.resize(static_cast<std::size_t>(in.gcount()));
-  if (const auto h = ReadImageHeader(bytes); h && h->width > 0 && h->height > 0)
-    return std::make_pair(h->width, h->height);
-  in.close();
-  const std::string all = ReadFileBytes(path);
-  if (const auto h = ReadImageHeader(all)) {  // a JPEG whose frame header lies beyond 1 MiB
-    if (h->width > 0 && h->height > 0) return std::make_pair(h->width, h->height);
-    throw InputError(path.string(), "the " + h->format + " header gives no image size");
-  }
-  const auto [width, height] = OtherImageSize(path, all);
+  if (!std::ifstream(path, std::ios::binary)) return std::nullopt;
+  const auto [width, height] = ImageFileHeaderSize(path);
   if (width > std::numeric_limits<int>::max() || height > std::numeric_limits<int>::max())
     throw InputError(path.string(), "image header says " + std::to_string(width) + "x" + std::to_string(height));
   return std::make_pair(static_cast<int>(width), static_cast<int>(height));

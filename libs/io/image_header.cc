@@ -221,6 +221,16 @@ std::pair<long long, long long> OtherImageSize(const std::filesystem::path& file
 }
 
 std::pair<long long, long long> ImageFileHeaderSize(const std::filesystem::path& file) {
+  {
+    // The first 1 MiB holds any PNG's header and any JPEG's frame header after its EXIF data.
+    std::ifstream in(file, std::ios::binary);
+    if (!in) throw InputError(file.string(), "cannot open image file");
+    std::string head(std::size_t{1} << 20, '\0');
+    in.read(head.data(), static_cast<std::streamsize>(head.size()));
+    head.resize(static_cast<std::size_t>(in.gcount()));
+    if (const auto h = ReadImageHeader(head); h && h->width > 0 && h->height > 0) return {h->width, h->height};
+  }
+  // Whole: a JPEG whose frame header lies beyond 1 MiB, or another format (a TIFF's directory may follow its pixels).
   const std::string bytes = ReadFileBytes(file);
   if (const auto h = ReadImageHeader(bytes)) {
     if (h->width <= 0 || h->height <= 0)

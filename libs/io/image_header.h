@@ -31,8 +31,9 @@ std::optional<OtherImageHeader> ReadOtherImageHeader(const std::string& bytes);
 std::pair<long long, long long> OtherImageSize(const std::filesystem::path& file, const std::string& bytes);
 
 // The width and height of any image file this reads (PNG, JPEG and the
-// formats above) from its header, without decoding it; InputError naming the
-// file as OtherImageSize.
+// formats above) from its header, without decoding it (a PNG or JPEG from its
+// first 1 MiB, other files read whole); InputError naming the file when it
+// cannot be opened or as OtherImageSize.
 std::pair<long long, long long> ImageFileHeaderSize(const std::filesystem::path& file);
 
 }  // namespace lfrecon
