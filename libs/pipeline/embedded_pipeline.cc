@@ -439,6 +439,8 @@ PipelineResult EmbeddedPipeline::Run(FrameSource& frames) {
   result.mesh = std::move(finished.mesh);
   st.refine = finished.refine;
   st.seconds_refine = finished.seconds_refine;
+  st.seconds_smooth = finished.seconds_smooth;
+  st.smoothing = finished.smoothing;
   st.seconds_color = finished.seconds_color;
   st.cpu_finish = tf.CpuSeconds();
   st.mesh_vertices = result.mesh.vertices.size();
@@ -485,6 +487,7 @@ PipelineResult EmbeddedPipeline::Run(FrameSource& frames) {
         {"refine", st.seconds_refine},
         {"refine_carving", st.refine.seconds_carving},
         {"refine_poisson", st.refine.seconds_poisson},
+        {"smooth", st.seconds_smooth},
         {"color", st.seconds_color},
         {"write", st.seconds_write},
         {"total", st.seconds_total}}},
@@ -527,7 +530,9 @@ PipelineResult EmbeddedPipeline::Run(FrameSource& frames) {
         {"preview_views", preview_ids.size()},
         {"carved_per_round", st.refine.carved_per_round},
         {"poisson_points", st.refine.poisson_points},
-        {"poisson_depth", st.refine.poisson_depth}}},
+        {"poisson_depth", st.refine.poisson_depth},
+        {"smoothed_vertices", st.smoothing.vertices_moved},
+        {"smoothing_capped_vertices", st.smoothing.vertices_capped}}},
       {"options",
        {{"densify", options_.densify},
         {"run_filter", options_.depth.run_filter},
@@ -558,6 +563,8 @@ PipelineResult EmbeddedPipeline::Run(FrameSource& frames) {
         {"carving_mask_margin_px",
          mask_carving ? nlohmann::json(options_.refine_options.carving.mask_margin_px) : nlohmann::json()},
         {"poisson", options_.refine && options_.refine_options.use_poisson},
+        {"smooth_iterations", options_.mesh_smoothing.iterations},
+        {"smooth_max_displacement_voxels", options_.mesh_smoothing.max_displacement_voxels},
         {"consistency_threshold", options_.refine_options.carving.consistency_threshold},
         {"carving_rounds", options_.refine_options.carving.max_rounds}}},
   };

@@ -4,6 +4,14 @@
 
 namespace lfrecon {
 
+TaubinSmoothingOptions SmoothingOptions(const PipelineOptions& options, double voxel_size) {
+  TaubinSmoothingOptions so;
+  so.iterations = options.mesh_smoothing.iterations;
+  so.max_displacement = options.mesh_smoothing.max_displacement_voxels * voxel_size;
+  so.min_component_vertices = options.mesh_smoothing.min_component_vertices;
+  return so;
+}
+
 FinishedSurface FinishSurface(const ProbabilisticFusion& fusion, const TriangleMesh& fused,
                               const std::vector<ColorView>& carve, const std::vector<ColorView>& color,
                               const PipelineOptions& options, const std::vector<cv::Mat>& carve_masks) {
@@ -18,6 +26,11 @@ FinishedSurface FinishSurface(const ProbabilisticFusion& fusion, const TriangleM
   }
   // Too few boundary voxels for Poisson (or no refinement): the fused surface rather than nothing.
   if (!out.refined) out.mesh = fused;
+  if (options.mesh_smoothing.iterations > 0) {
+    Timer ts;
+    out.smoothing = SmoothTaubin(&out.mesh, SmoothingOptions(options, fusion.options().voxel_size));
+    out.seconds_smooth = ts.Seconds();
+  }
   Timer tc;
   if (!color.empty() && !out.mesh.triangles.empty()) ColorizeMesh(&out.mesh, color, options.coloring);
   out.seconds_color = tc.Seconds();

@@ -35,6 +35,10 @@ PipelineOptions OptionsFromFlags(const ReconstructionFlags& f) {
     if (*f.refine_depth_views < 0) throw OptionError("--refine-depth-views must be >= 0 (0: no refinement)");
     options.propagation.refinement.views = *f.refine_depth_views;
   }
+  if (f.smooth_iterations) {
+    if (*f.smooth_iterations < 0) throw OptionError("--smooth-iterations must be >= 0 (0: no smoothing)");
+    options.mesh_smoothing.iterations = *f.smooth_iterations;
+  }
   options.Check();
   return options;
 }

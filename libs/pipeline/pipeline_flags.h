@@ -35,6 +35,9 @@ struct ReconstructionFlags {
   // Neighbours of the dense depth's photometric refinement (PhotometricRefinementOptions::views,
   // >= 0; 0: off); unset: the default (--refine-depth-views).
   std::optional<int> refine_depth_views;
+  // Taubin iterations of the final mesh (PipelineOptions::mesh_smoothing, >= 0; 0: off); unset: the
+  // default (--smooth-iterations).
+  std::optional<int> smooth_iterations;
 };
 
 // PipelineOptions defaults with the flags applied; checked (PipelineOptions::Check). Throws OptionError.

@@ -159,6 +159,17 @@ struct PipelineOptions {
   // false: the final mesh is the fused iso-surface.
   bool refine = true;
   RefineOptions refine_options;
+  // Taubin smoothing of the final mesh (after the refinement, before colour;
+  // geometry/mesh_smoothing.h). The iso-surface's vertices carry the fused
+  // field's noise and its open rims are ragged; smoothing raised F@2 and F@5 on
+  // every set of the quality table at a thin-recall cost of at most 0.005
+  // (docs/benchmarks.md, "Taubin smoothing of the final mesh"). mesh_raw.ply
+  // stays the unsmoothed fused surface.
+  struct MeshSmoothing {
+    int iterations = 6;                   // λ|μ pairs (λ 0.5, μ -0.53); 0: off (--smooth-iterations)
+    double max_displacement_voxels = 1;  // no vertex moves farther than this many voxels
+    int min_component_vertices = 100;    // smaller components (thin fragments) are left alone
+  } mesh_smoothing;
   // Frames kept (evenly spread over the processed views) for carving's
   // photo-consistency (eqs. 15-16); frames also kept for colour share pixels.
   int carving_views = 24;

@@ -41,6 +41,7 @@ struct RunArgs {
   std::optional<double> chroma_weight;
   std::optional<double> view_step_deg;
   std::optional<int> refine_depth_views;
+  std::optional<int> smooth_iterations;
   bool no_refine_poses = false;
   bool no_mask_free_space = false;
   bool no_geometric_consistency = false;
@@ -89,6 +90,7 @@ int RunPipeline(const RunArgs& args) {
   flags.chroma_weight = args.chroma_weight;
   flags.view_step_deg = args.view_step_deg;
   flags.refine_depth_views = args.refine_depth_views;
+  flags.smooth_iterations = args.smooth_iterations;
   PipelineOptions options = OptionsFromFlags(flags);
   const Dataset ds = Dataset::Open(args.data.Resolve());
   if (!args.views.empty()) options.views = ParseViewRange(args.views, ds.NumViews());
@@ -177,6 +179,9 @@ void AddRunCommand(CLI::App& root, int* exit_code) {
   cmd->add_option("--refine-depth-views", args->refine_depth_views,
                   "Neighbours (the widest baselines) each dense depth is searched again over by ZNCC "
                   "(PhotometricRefinementOptions::views; 0: no refinement)");
+  cmd->add_option("--smooth-iterations", args->smooth_iterations,
+                  "Taubin smoothing steps of the final mesh (default 6; 0: off). No vertex moves more than a voxel; "
+                  "mesh_raw.ply stays unsmoothed");
   cmd->add_option("--max-frame-gap", args->max_frame_gap,
                   "Views more than this many frames apart are never neighbours (0: no limit; default 1000). "
                   "`lfrecon stream --max-frame-gap` with the same bound computes the same mesh");
