@@ -440,6 +440,7 @@ PipelineResult EmbeddedPipeline::Run(FrameSource& frames) {
   st.refine = finished.refine;
   st.seconds_refine = finished.seconds_refine;
   st.seconds_smooth = finished.seconds_smooth;
+  st.rim_trim = finished.rim_trim;
   st.smoothing = finished.smoothing;
   st.seconds_color = finished.seconds_color;
   st.cpu_finish = tf.CpuSeconds();
@@ -531,6 +532,7 @@ PipelineResult EmbeddedPipeline::Run(FrameSource& frames) {
         {"carved_per_round", st.refine.carved_per_round},
         {"poisson_points", st.refine.poisson_points},
         {"poisson_depth", st.refine.poisson_depth},
+        {"rim_triangles_removed", st.rim_trim.triangles_removed},
         {"smoothed_vertices", st.smoothing.vertices_moved},
         {"smoothing_capped_vertices", st.smoothing.vertices_capped}}},
       {"options",
@@ -563,6 +565,7 @@ PipelineResult EmbeddedPipeline::Run(FrameSource& frames) {
         {"carving_mask_margin_px",
          mask_carving ? nlohmann::json(options_.refine_options.carving.mask_margin_px) : nlohmann::json()},
         {"poisson", options_.refine && options_.refine_options.use_poisson},
+        {"rim_trim_rounds", options_.rim_trim.rounds},
         {"smooth_iterations", options_.mesh_smoothing.iterations},
         {"smooth_max_displacement_voxels", options_.mesh_smoothing.max_displacement_voxels},
         {"consistency_threshold", options_.refine_options.carving.consistency_threshold},

@@ -21,6 +21,7 @@
 
 #include "fusion/mesh_coloring.h"
 #include "fusion/probabilistic_fusion.h"
+#include "geometry/mesh_rims.h"
 #include "geometry/mesh_smoothing.h"
 #include "geometry/pinhole_view.h"
 #include "geometry/triangle_mesh.h"
@@ -50,12 +51,13 @@ struct PipelineStats {
   double seconds_sparse = 0, seconds_filter = 0, seconds_densify = 0, seconds_fusion = 0;
   double seconds_mesh = 0, seconds_color = 0, seconds_write = 0, seconds_total = 0;
   double seconds_refine = 0;  // carving + Poisson (their split is in `refine`)
-  double seconds_smooth = 0;  // PipelineOptions::mesh_smoothing
+  double seconds_smooth = 0;  // PipelineOptions::rim_trim and mesh_smoothing
   // Process CPU seconds (user + system, every thread) of the same stages.
   double cpu_sparse = 0, cpu_filter = 0, cpu_densify = 0, cpu_fusion = 0;
   double cpu_mesh = 0, cpu_finish = 0, cpu_write = 0, cpu_total = 0;  // finish: refine + colour
   int carving_frames = 0;
   RefineStats refine;  // when options.refine
+  RimTrimStats rim_trim;           // PipelineOptions::rim_trim
   TaubinSmoothingStats smoothing;  // PipelineOptions::mesh_smoothing
   std::int64_t peak_rss_bytes = 0;
 };

@@ -26,11 +26,13 @@ FinishedSurface FinishSurface(const ProbabilisticFusion& fusion, const TriangleM
   }
   // Too few boundary voxels for Poisson (or no refinement): the fused surface rather than nothing.
   if (!out.refined) out.mesh = fused;
-  if (options.mesh_smoothing.iterations > 0) {
-    Timer ts;
+  // Rims first: smoothing would pull a ragged rim's triangles in before they go (measured both ways, trimming
+  // first kept more F@2).
+  Timer ts;
+  out.rim_trim = TrimOpenRims(&out.mesh, options.rim_trim);
+  if (options.mesh_smoothing.iterations > 0)
     out.smoothing = SmoothTaubin(&out.mesh, SmoothingOptions(options, fusion.options().voxel_size));
-    out.seconds_smooth = ts.Seconds();
-  }
+  out.seconds_smooth = ts.Seconds();
   Timer tc;
   if (!color.empty() && !out.mesh.triangles.empty()) ColorizeMesh(&out.mesh, color, options.coloring);
   out.seconds_color = tc.Seconds();

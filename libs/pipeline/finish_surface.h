@@ -7,6 +7,7 @@
 
 #include "fusion/mesh_coloring.h"
 #include "fusion/probabilistic_fusion.h"
+#include "geometry/mesh_rims.h"
 #include "geometry/mesh_smoothing.h"
 #include "geometry/triangle_mesh.h"
 #include "pipeline/pipeline_options.h"
@@ -18,16 +19,17 @@ struct FinishedSurface {
   TriangleMesh mesh;  // refined (or the fused mesh), coloured when colour frames were given
   RefineStats refine;
   bool refined = false;  // options.refine and it made a surface
+  RimTrimStats rim_trim;           // PipelineOptions::rim_trim
   TaubinSmoothingStats smoothing;  // PipelineOptions::mesh_smoothing
-  double seconds_refine = 0, seconds_smooth = 0, seconds_color = 0;
+  double seconds_refine = 0, seconds_smooth = 0, seconds_color = 0;  // smooth: rim trim + smoothing
 };
 
 // `fused`: the grid's iso-surface (ExtractMesh(options.meshing)); `carve`: the
 // carving frames (ReconstructionPlan::carving_frames), `color`: the colour frames;
 // `carve_masks`: empty, or the object mask of each carving frame (empty Mats
 // where a frame has none; CarvingOptions::carve_outside_masks).
-// Without options.refine the mesh is `fused`. Either is then smoothed
-// (options.mesh_smoothing) and coloured.
+// Without options.refine the mesh is `fused`. Either then loses its open rims
+// (options.rim_trim), is smoothed (options.mesh_smoothing) and coloured.
 FinishedSurface FinishSurface(const ProbabilisticFusion& fusion, const TriangleMesh& fused,
                               const std::vector<ColorView>& carve, const std::vector<ColorView>& color,
                               const PipelineOptions& options, const std::vector<cv::Mat>& carve_masks = {});

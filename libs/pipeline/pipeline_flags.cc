@@ -39,6 +39,10 @@ PipelineOptions OptionsFromFlags(const ReconstructionFlags& f) {
     if (*f.smooth_iterations < 0) throw OptionError("--smooth-iterations must be >= 0 (0: no smoothing)");
     options.mesh_smoothing.iterations = *f.smooth_iterations;
   }
+  if (f.rim_trim_rounds) {
+    if (*f.rim_trim_rounds < 0) throw OptionError("--rim-trim-rounds must be >= 0 (0: no trimming)");
+    options.rim_trim.rounds = *f.rim_trim_rounds;
+  }
   options.Check();
   return options;
 }

@@ -38,6 +38,9 @@ struct ReconstructionFlags {
   // Taubin iterations of the final mesh (PipelineOptions::mesh_smoothing, >= 0; 0: off); unset: the
   // default (--smooth-iterations).
   std::optional<int> smooth_iterations;
+  // Rounds of rim trimming of the final mesh (PipelineOptions::rim_trim, >= 0; 0: off); unset: the
+  // default (--rim-trim-rounds).
+  std::optional<int> rim_trim_rounds;
 };
 
 // PipelineOptions defaults with the flags applied; checked (PipelineOptions::Check). Throws OptionError.

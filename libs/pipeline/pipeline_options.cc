@@ -16,6 +16,7 @@ void PipelineOptions::Check() const {
   geometric_consistency.Check();
   if (color_views < 0) throw OptionError("color_views must be >= 0");
   if (refine) refine_options.Check();
+  rim_trim.Check();
   LFRECON_CHECK_OPTION(mesh_smoothing.iterations >= 0);
   LFRECON_CHECK_OPTION(mesh_smoothing.max_displacement_voxels > 0);
   LFRECON_CHECK_OPTION(mesh_smoothing.min_component_vertices >= 0);

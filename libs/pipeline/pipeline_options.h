@@ -12,6 +12,7 @@
 #include "fusion/fusion_options.h"
 #include "fusion/geometric_consistency.h"
 #include "fusion/mesh_coloring.h"
+#include "geometry/mesh_rims.h"
 #include "geometry/triangle_mesh.h"
 #include "propagation/depth_propagator.h"
 #include "refine/refine.h"
@@ -159,12 +160,14 @@ struct PipelineOptions {
   // false: the final mesh is the fused iso-surface.
   bool refine = true;
   RefineOptions refine_options;
-  // Taubin smoothing of the final mesh (after the refinement, before colour;
-  // geometry/mesh_smoothing.h). The iso-surface's vertices carry the fused
-  // field's noise and its open rims are ragged; smoothing raised F@2 and F@5 on
-  // every set of the quality table at a thin-recall cost of at most 0.005
-  // (docs/benchmarks.md, "Taubin smoothing of the final mesh"). mesh_raw.ply
-  // stays the unsmoothed fused surface.
+  // The final mesh (after the refinement, before colour) loses the triangles on
+  // its open rims (geometry/mesh_rims.h), then is Taubin-smoothed
+  // (geometry/mesh_smoothing.h): rims lie off the surface more often than the
+  // rest, and the iso-surface's vertices carry the fused field's noise.
+  // Together they raised F@2 and F@5 on every set of the quality table but
+  // one (docs/benchmarks.md, "Open rims trimmed and the mesh smoothed", with
+  // what they cost thin recall). mesh_raw.ply stays the fused iso-surface.
+  RimTrimOptions rim_trim;  // rounds 0: off (--rim-trim-rounds)
   struct MeshSmoothing {
     int iterations = 6;                   // λ|μ pairs (λ 0.5, μ -0.53); 0: off (--smooth-iterations)
     double max_displacement_voxels = 1;  // no vertex moves farther than this many voxels

@@ -42,6 +42,7 @@ struct RunArgs {
   std::optional<double> view_step_deg;
   std::optional<int> refine_depth_views;
   std::optional<int> smooth_iterations;
+  std::optional<int> rim_trim_rounds;
   bool no_refine_poses = false;
   bool no_mask_free_space = false;
   bool no_geometric_consistency = false;
@@ -91,6 +92,7 @@ int RunPipeline(const RunArgs& args) {
   flags.view_step_deg = args.view_step_deg;
   flags.refine_depth_views = args.refine_depth_views;
   flags.smooth_iterations = args.smooth_iterations;
+  flags.rim_trim_rounds = args.rim_trim_rounds;
   PipelineOptions options = OptionsFromFlags(flags);
   const Dataset ds = Dataset::Open(args.data.Resolve());
   if (!args.views.empty()) options.views = ParseViewRange(args.views, ds.NumViews());
@@ -179,6 +181,9 @@ void AddRunCommand(CLI::App& root, int* exit_code) {
   cmd->add_option("--refine-depth-views", args->refine_depth_views,
                   "Neighbours (the widest baselines) each dense depth is searched again over by ZNCC "
                   "(PhotometricRefinementOptions::views; 0: no refinement)");
+  cmd->add_option("--rim-trim-rounds", args->rim_trim_rounds,
+                  "Rounds of dropping the final mesh's triangles on its open rims, before smoothing (default 1; 0: "
+                  "off). Components under 100 vertices stay whole");
   cmd->add_option("--smooth-iterations", args->smooth_iterations,
                   "Taubin smoothing steps of the final mesh (default 6; 0: off). No vertex moves more than a voxel; "
                   "mesh_raw.ply stays unsmoothed");
