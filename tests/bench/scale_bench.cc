@@ -26,6 +26,8 @@
 //   --ray-margin M: GradientDepthOptions::ray_margin (negative: every edge pixel gets a depth);
 //   --peak-fraction F: GradientDepthOptions::gradient_peak_fraction (1: only gradient maxima get a depth);
 //   --photo-max-views N: PhotoconsistencyOptions::max_views of the densification (0: every view within 5°).
+//   --rim-trim-rounds N, --smooth-iterations N: PipelineOptions::rim_trim.rounds and mesh_smoothing.iterations
+//   of the final mesh (as `lfrecon run`'s flags; 0: off).
 // --view-stride K (pipeline mode): PipelineOptions::views = 0, K, 2K, ... (`lfrecon run --views
 //   0:N:K`): only those views get depth maps and are fused; every frame is still read and
 //   serves as a neighbour (hierarchy, photoconsistency). At 3000 frames a loop (0.12°) K = 5
@@ -248,6 +250,7 @@ int main(int argc, char** argv) {
   int max_frame_gap = StreamingDepthOptions{}.max_frame_gap;
   std::optional<double> ray_margin, peak_fraction;
   std::optional<int> photo_max_views;
+  std::optional<int> rim_trim_rounds, smooth_iterations;
   int frames = 3000, width = 1280, height = 720, divisions = 256, report_every = 250, threads = 0, max_block = 16;
   int view_stride = 1;
   double loops = 0, budget_mib = 1024;
@@ -285,6 +288,8 @@ int main(int argc, char** argv) {
     } else if (k == "--ray-margin") ray_margin = std::atof(value().c_str());  // negative: every edge pixel
     else if (k == "--peak-fraction") peak_fraction = std::atof(value().c_str());
     else if (k == "--photo-max-views") photo_max_views = std::atoi(value().c_str());
+    else if (k == "--rim-trim-rounds") rim_trim_rounds = std::atoi(value().c_str());
+    else if (k == "--smooth-iterations") smooth_iterations = std::atoi(value().c_str());
     else if (k == "--max-frame-gap") max_frame_gap = std::atoi(value().c_str());
     else if (k == "--no-compact") compact = false;
     else if (k == "--view-stride") view_stride = std::atoi(value().c_str());
@@ -432,6 +437,8 @@ int main(int argc, char** argv) {
   if (ray_margin) po.depth.gradient.ray_margin = *ray_margin;
   if (peak_fraction) po.depth.gradient.gradient_peak_fraction = *peak_fraction;
   if (photo_max_views) po.propagation.photo.max_views = *photo_max_views;
+  if (rim_trim_rounds) po.rim_trim.rounds = *rim_trim_rounds;
+  if (smooth_iterations) po.mesh_smoothing.iterations = *smooth_iterations;
   po.write_vdb = false;
   po.write_turntable = false;
   po.fusion.store_budget_bytes = budget;
