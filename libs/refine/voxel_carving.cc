@@ -284,7 +284,8 @@ CarvingResult VoxelCarving(VoxelGrid* grid, const std::vector<ColorView>& color_
     for (const Eigen::Vector3i& v : grid->OccupiedVoxels())
       if (region.count(Key(v)) && grid->IsExposed(v) && !(options.keep_inner_wall && BordersUnknown(*grid, v)))
         candidates.push_back(v);
-    std::vector<signed char> verdict(candidates.size(), 0);  // 1 carve, 0 keep, -1 unseen
+    // 1 carve, 0 keep, -1 unseen, 2 keep: inconsistent, and as inconsistent a voxel deeper
+    std::vector<signed char> verdict(candidates.size(), 0);
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, candidates.size()), [&](const auto& range) {
       for (std::size_t k = range.begin(); k < range.end(); ++k) {
         const Eigen::Vector3i& v = candidates[k];
@@ -295,6 +296,26 @@ CarvingResult VoxelCarving(VoxelGrid* grid, const std::vector<ColorView>& color_
         const double pc = PhotoConsistencyVariance(x, n, views, images, back, tolerance,
                                                    options.min_views, nullptr, options.min_cos);
         verdict[k] = pc < 0 ? -1 : (1.0 - pc < options.consistency_threshold ? 1 : 0);
+        if (verdict[k] == 1 && options.require_consistent_behind) {
+          // Deeper, a voxel at a time through R's depth: carve when a point looks consistent or free space
+          // follows (a thin part or a sheet seen through); keep when every point seen looks inconsistent, up
+          // to R's depth or to the unobserved inside.
+          bool inconsistent_behind = false, resolved = false;
+          for (int s = 1; s <= options.region_depth && !resolved; ++s) {
+            const Eigen::Vector3d behind = x - s * grid->voxel_size() * n.normalized();
+            const VoxelState state = grid->State(grid->Index(behind));
+            if (state != VoxelState::kOccupied) {
+              resolved = state == VoxelState::kFree;
+              break;
+            }
+            const double pc_behind = PhotoConsistencyVariance(behind, n, views, images, back, tolerance,
+                                                              options.min_views, nullptr, options.min_cos);
+            if (pc_behind < 0) continue;
+            if (1.0 - pc_behind >= options.consistency_threshold) resolved = true;
+            else inconsistent_behind = true;
+          }
+          if (!resolved && inconsistent_behind) verdict[k] = 2;
+        }
       }
     });
     for (std::size_t k = 0; k < candidates.size(); ++k) {
@@ -303,14 +324,17 @@ CarvingResult VoxelCarving(VoxelGrid* grid, const std::vector<ColorView>& color_
         continue;
       }
       ++stats.judged;
-      if (verdict[k] > 0) {
+      if (verdict[k] == 2) ++stats.kept_inconsistent_behind;
+      if (verdict[k] == 1) {
         grid->Carve(candidates[k]);
         ++stats.carved;
       }
     }
     stats.seconds = timer.Seconds();
-    spdlog::info("carving round {}: {} exposed voxels of R judged ({} seen by fewer than {} views), {} carved ({:.1f} s)",
-                 round + 1, stats.judged, stats.unseen, options.min_views, stats.carved, stats.seconds);
+    spdlog::info("carving round {}: {} exposed voxels of R judged ({} seen by fewer than {} views), {} carved, {} "
+                 "inconsistent kept (as inconsistent a voxel deeper) ({:.1f} s)",
+                 round + 1, stats.judged, stats.unseen, options.min_views, stats.carved,
+                 stats.kept_inconsistent_behind, stats.seconds);
     result.rounds.push_back(stats);
     if (stats.carved == 0) break;
   }
