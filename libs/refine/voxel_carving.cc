@@ -332,7 +332,7 @@ CarvingResult VoxelCarving(VoxelGrid* grid, const std::vector<ColorView>& color_
     }
     stats.seconds = timer.Seconds();
     spdlog::info("carving round {}: {} exposed voxels of R judged ({} seen by fewer than {} views), {} carved, {} "
-                 "inconsistent kept (as inconsistent a voxel deeper) ({:.1f} s)",
+                 "inconsistent kept (as inconsistent deeper) ({:.1f} s)",
                  round + 1, stats.judged, stats.unseen, options.min_views, stats.carved,
                  stats.kept_inconsistent_behind, stats.seconds);
     result.rounds.push_back(stats);

@@ -17,7 +17,7 @@ struct CarvingRound {
   std::size_t judged = 0;   // exposed voxels of R seen by >= min_views views
   std::size_t unseen = 0;   // exposed voxels of R seen by fewer views (kept)
   std::size_t carved = 0;
-  // Inconsistent, but kept: as inconsistent one voxel deeper (CarvingOptions::require_consistent_behind).
+  // Inconsistent, but kept: as inconsistent deeper (CarvingOptions::require_consistent_behind).
   std::size_t kept_inconsistent_behind = 0;
   double seconds = 0;
 };
