@@ -11,7 +11,7 @@
 // Written here rather than taken from Open3D (TriangleMesh::FilterSmoothTaubin)
 // for those two bounds: without them, on the figurines and the generated
 // tabletops, thin recall@5mm fell by up to 0.017 (docs/benchmarks.md,
-// "Taubin smoothing of the final mesh").
+// "Open rims trimmed and the mesh smoothed").
 #include <limits>
 
 #include "geometry/triangle_mesh.h"
