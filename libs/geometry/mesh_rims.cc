@@ -18,28 +18,6 @@ double TriangleArea(const TriangleMesh& m, const Eigen::Vector3i& t) {
   return 0.5 * (m.vertices[t[1]] - m.vertices[t[0]]).cross(m.vertices[t[2]] - m.vertices[t[0]]).cast<double>().norm();
 }
 
-// Drops the vertices no triangle uses, keeping the order of the others.
-void DropUnusedVertices(TriangleMesh* mesh) {
-  std::vector<int> index(mesh->vertices.size(), -1);
-  for (const auto& t : mesh->triangles)
-    for (int k = 0; k < 3; ++k) index[t[k]] = 0;
-  const bool normals = mesh->HasNormals(), colors = mesh->HasColors();
-  int kept = 0;
-  for (std::size_t i = 0; i < index.size(); ++i) {
-    if (index[i] < 0) continue;
-    index[i] = kept;
-    mesh->vertices[kept] = mesh->vertices[i];
-    if (normals) mesh->normals[kept] = mesh->normals[i];
-    if (colors) mesh->colors[kept] = mesh->colors[i];
-    ++kept;
-  }
-  mesh->vertices.resize(kept);
-  if (normals) mesh->normals.resize(kept);
-  if (colors) mesh->colors.resize(kept);
-  for (auto& t : mesh->triangles)
-    for (int k = 0; k < 3; ++k) t[k] = index[t[k]];
-}
-
 }  // namespace
 
 RimTrimStats TrimOpenRims(TriangleMesh* mesh, const RimTrimOptions& options) {
@@ -64,7 +42,7 @@ RimTrimStats TrimOpenRims(TriangleMesh* mesh, const RimTrimOptions& options) {
     mesh->triangles.swap(kept);
   }
   const bool normals = mesh->HasNormals();
-  DropUnusedVertices(mesh);
+  mesh->RemoveUnreferencedVertices();
   if (normals) mesh->ComputeVertexNormals();
   return stats;
 }

@@ -32,6 +32,27 @@ void TriangleMesh::ComputeVertexNormals() {
   }
 }
 
+void TriangleMesh::RemoveUnreferencedVertices() {
+  std::vector<int> index(vertices.size(), -1);
+  for (const auto& t : triangles)
+    for (int k = 0; k < 3; ++k) index[t[k]] = 0;
+  const bool has_normals = HasNormals(), has_colors = HasColors();
+  int kept = 0;
+  for (std::size_t i = 0; i < index.size(); ++i) {
+    if (index[i] < 0) continue;
+    index[i] = kept;
+    vertices[kept] = vertices[i];
+    if (has_normals) normals[kept] = normals[i];
+    if (has_colors) colors[kept] = colors[i];
+    ++kept;
+  }
+  vertices.resize(kept);
+  if (has_normals) normals.resize(kept);
+  if (has_colors) colors.resize(kept);
+  for (auto& t : triangles)
+    for (int k = 0; k < 3; ++k) t[k] = index[t[k]];
+}
+
 double TriangleMesh::SurfaceArea() const {
   double area = 0;
   for (const auto& t : triangles)

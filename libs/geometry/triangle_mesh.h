@@ -21,6 +21,9 @@ struct TriangleMesh {
   void Append(const TriangleMesh& other);
   // Area-weighted vertex normals from the triangles.
   void ComputeVertexNormals();
+  // Drops the vertices no triangle uses (their normals and colours with them),
+  // keeping the order of the others (Open3D's RemoveUnreferencedVertices).
+  void RemoveUnreferencedVertices();
   double SurfaceArea() const;
   // Axis-aligned bounds of the vertices.
   void Bounds(Eigen::Vector3f* min, Eigen::Vector3f* max) const;

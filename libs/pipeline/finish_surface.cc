@@ -30,8 +30,7 @@ FinishedSurface FinishSurface(const ProbabilisticFusion& fusion, const TriangleM
   // first kept more F@2).
   Timer ts;
   out.rim_trim = TrimOpenRims(&out.mesh, options.rim_trim);
-  if (options.mesh_smoothing.iterations > 0)
-    out.smoothing = SmoothTaubin(&out.mesh, SmoothingOptions(options, fusion.options().voxel_size));
+  out.smoothing = SmoothTaubin(&out.mesh, SmoothingOptions(options, fusion.options().voxel_size));
   out.seconds_smooth = ts.Seconds();
   Timer tc;
   if (!color.empty() && !out.mesh.triangles.empty()) ColorizeMesh(&out.mesh, color, options.coloring);

@@ -44,27 +44,13 @@ TriangleMesh RemoveSmallComponents(const TriangleMesh& mesh, double min_area, Co
     if (stats) *stats = st;
     return mesh;
   }
-  TriangleMesh out;
-  std::vector<int> index(nv, -1);
-  const bool normals = mesh.HasNormals(), colors = mesh.HasColors();
+  TriangleMesh out = mesh;
+  out.triangles.clear();
   for (const Eigen::Vector3i& t : mesh.triangles) {
-    if (area[Find(parent, t[0])] < min_area) {
-      ++st.triangles_removed;
-      continue;
-    }
-    Eigen::Vector3i m;
-    for (int k = 0; k < 3; ++k) {
-      int& j = index[t[k]];
-      if (j < 0) {
-        j = static_cast<int>(out.vertices.size());
-        out.vertices.push_back(mesh.vertices[t[k]]);
-        if (normals) out.normals.push_back(mesh.normals[t[k]]);
-        if (colors) out.colors.push_back(mesh.colors[t[k]]);
-      }
-      m[k] = j;
-    }
-    out.triangles.push_back(m);
+    if (area[Find(parent, t[0])] < min_area) ++st.triangles_removed;
+    else out.triangles.push_back(t);
   }
+  out.RemoveUnreferencedVertices();
   if (stats) *stats = st;
   return out;
 }

@@ -51,14 +51,14 @@ struct CarvingOptions {
   // turn, and it is carved at the first that looks consistent or that lies
   // in observed free space (a thin part, a floater or a sheet seen through),
   // or when too few views see any of them; it is kept when every one seen
-  // looks inconsistent too (up to R's depth or the unobserved inside). A correct surface that looks
-  // inconsistent for another reason (pose error, aliasing on strong texture)
-  // looks as inconsistent deeper, and stays; a halo or blob in front of the
-  // true surface is carved as before. On the quality table it raised F@2 on
-  // the occlusion scene 0.799 -> 0.829 with thin recall within 0.002
-  // (docs/benchmarks.md, "Carving only where it can help"); judging one voxel
-  // deeper only gave 0.851 there but cost the degraded tabletop's thin recall
-  // 0.016.
+  // looks inconsistent too (up to R's depth or the unobserved inside). A
+  // correct surface that looks inconsistent for another reason (pose error,
+  // aliasing on strong texture) looks as inconsistent deeper, and stays; a
+  // halo or blob in front of the true surface is carved as before. On the
+  // quality table (at consistency 0.95) it raised F@2 on the occlusion scene
+  // 0.799 -> 0.835 with thin recall within 0.002 (docs/benchmarks.md,
+  // "Carving only where it can help"); judging one voxel deeper only gave
+  // 0.851 there but cost the degraded tabletop's thin recall 0.016.
   bool require_consistent_behind = true;
   // Object masks (ours), when the views come with them (VoxelCarving's
   // `masks`): before the photo-consistency rounds, every occupied voxel that a

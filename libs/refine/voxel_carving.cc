@@ -284,7 +284,7 @@ CarvingResult VoxelCarving(VoxelGrid* grid, const std::vector<ColorView>& color_
     for (const Eigen::Vector3i& v : grid->OccupiedVoxels())
       if (region.count(Key(v)) && grid->IsExposed(v) && !(options.keep_inner_wall && BordersUnknown(*grid, v)))
         candidates.push_back(v);
-    // 1 carve, 0 keep, -1 unseen, 2 keep: inconsistent, and as inconsistent a voxel deeper
+    // 1 carve, 0 keep, -1 unseen, 2 keep: inconsistent, and as inconsistent deeper
     std::vector<signed char> verdict(candidates.size(), 0);
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, candidates.size()), [&](const auto& range) {
       for (std::size_t k = range.begin(); k < range.end(); ++k) {
@@ -300,9 +300,10 @@ CarvingResult VoxelCarving(VoxelGrid* grid, const std::vector<ColorView>& color_
           // Deeper, a voxel at a time through R's depth: carve when a point looks consistent or free space
           // follows (a thin part or a sheet seen through); keep when every point seen looks inconsistent, up
           // to R's depth or to the unobserved inside.
+          const Eigen::Vector3d step = grid->voxel_size() * n.normalized();
           bool inconsistent_behind = false, resolved = false;
           for (int s = 1; s <= options.region_depth && !resolved; ++s) {
-            const Eigen::Vector3d behind = x - s * grid->voxel_size() * n.normalized();
+            const Eigen::Vector3d behind = x - s * step;
             const VoxelState state = grid->State(grid->Index(behind));
             if (state != VoxelState::kOccupied) {
               resolved = state == VoxelState::kFree;

@@ -2,6 +2,8 @@
 
 #include <gtest/gtest.h>
 
+#include <vector>
+
 namespace lfrecon {
 namespace {
 
@@ -41,6 +43,24 @@ TEST(BoundingBox, RayBoxInterval) {
   EXPECT_GT(t0, t1);
   EXPECT_FALSE(RayBoxInterval(Eigen::Vector3d(2, 0, 0), Eigen::Vector3d(0, 0, 1), box, &t0, &t1));  // parallel, beside
   EXPECT_GT(t0, t1);
+}
+
+TEST(TriangleMesh, RemoveUnreferencedVerticesKeepsTheOthersInOrder) {
+  TriangleMesh m;
+  for (int i = 0; i < 6; ++i) {
+    m.vertices.emplace_back(i, 0, 0);
+    m.normals.emplace_back(0, 0, 1);
+    m.colors.emplace_back(i, 0, 0);
+  }
+  m.triangles = {{4, 1, 3}, {3, 1, 5}};  // 0 and 2 unused
+  m.RemoveUnreferencedVertices();
+  ASSERT_EQ(m.vertices.size(), 4u);
+  EXPECT_EQ(m.normals.size(), 4u);
+  ASSERT_EQ(m.colors.size(), 4u);
+  for (int i = 0; i < 4; ++i) EXPECT_EQ(m.colors[i][0], std::vector<int>({1, 3, 4, 5})[i]);
+  EXPECT_EQ(m.triangles[0], Eigen::Vector3i(2, 0, 1));
+  EXPECT_EQ(m.triangles[1], Eigen::Vector3i(1, 0, 3));
+  EXPECT_EQ(m.vertices[2].x(), 4.0f);
 }
 
 }  // namespace
